@@ -1,0 +1,44 @@
+# optrack: the README's two commands are `make run` and `make test`.
+# Both install what is missing (Debian packages, .venv, the project), then run.
+
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.optrack-installed
+XVFB   := xvfb-run -a -s "-screen 0 1280x1024x24"
+
+.PHONY: setup system-deps run test test-2d test-gl lint bench clean
+
+setup: system-deps $(STAMP)
+
+system-deps:
+	@bash packaging/install-system-deps.sh
+
+$(STAMP): pyproject.toml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[dev]'
+	@touch $(STAMP)
+
+run: setup
+	$(BIN)/optrack gui
+
+lint: setup
+	$(BIN)/ruff check optrack app tests
+
+# 2D widgets and everything without a display: offscreen Qt.
+test-2d: setup
+	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -m "not opengl"
+
+# OpenGL (3D) widgets: a real X server (Xvfb) and Qt's xcb platform.
+test-gl: setup
+	QT_QPA_PLATFORM=xcb $(XVFB) $(BIN)/python -m pytest -m opengl
+
+test: lint test-2d test-gl
+
+BENCH ?= e2e
+bench: setup
+	$(BIN)/optrack bench $(BENCH) --json
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache

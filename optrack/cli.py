@@ -1,0 +1,392 @@
+"""The ``optrack`` command line.
+
+Every subcommand of the measurement contract (docs/architecture.md) is
+declared here with its options. A command whose part of optrack has not
+been built yet says so in one line and exits with status 69 (EX_UNAVAILABLE);
+it never prints made-up figures. With ``--json`` a command prints one JSON
+object on stdout; progress and messages go to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from optrack import __version__
+from optrack.errors import UserError
+
+EXIT_OK = 0
+EXIT_ERROR = 1
+EXIT_USAGE = 2
+EXIT_UNAVAILABLE = 69
+
+
+class CommandError(UserError):
+    """A failure the user can fix; its message is one sentence."""
+
+
+def emit_json(payload: dict[str, Any]) -> None:
+    sys.stdout.write(json.dumps(payload) + "\n")
+    sys.stdout.flush()
+
+
+def info(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def _not_available(what: str) -> Callable[[argparse.Namespace], int]:
+    def handler(args: argparse.Namespace) -> int:
+        info(
+            f"optrack {args.command_name}: not available yet; {what} is not built into this version."
+        )
+        return EXIT_UNAVAILABLE
+
+    return handler
+
+
+# ------------------------------------------------------------------ commands
+
+
+def cmd_cloud(args: argparse.Namespace) -> int:
+    """Back-project a depth image (or a recording's frame) into a .pcd file."""
+    import numpy as np
+
+    from optrack.geometry import backproject
+    from optrack.io.images import read_color_image, read_depth_image
+    from optrack.io.pcd import write_pcd
+    from optrack.recording import Recording, is_recording
+    from optrack.types import Intrinsics, RGBDFrame
+
+    source = Path(args.input)
+    if not args.out.lower().endswith(".pcd"):
+        raise CommandError(f"--out {args.out} must name a .pcd file.")
+    if is_recording(source):
+        recording = Recording(source)
+        sensor = args.sensor or recording.sensor_ids[0]
+        frame = recording.frame(sensor, args.frame)
+        if args.intrinsics:
+            frame.intrinsics = Intrinsics.parse(args.intrinsics, *frame.depth.shape[::-1])
+        if args.depth_scale is not None:
+            frame.depth_scale = args.depth_scale
+    else:
+        if source.is_dir():
+            raise CommandError(
+                f"{source} is a directory but not an optrack recording (no manifest.yaml); "
+                "give a depth image or a recording."
+            )
+        if not args.intrinsics:
+            raise CommandError(
+                "a depth image needs --intrinsics fx,fy,cx,cy (pixels), e.g. --intrinsics 525,525,320,240."
+            )
+        depth = read_depth_image(source)
+        height, width = depth.shape
+        intrinsics = Intrinsics.parse(args.intrinsics, width, height)
+        scale = args.depth_scale if args.depth_scale is not None else 0.001
+        if depth.dtype != np.uint16:
+            scale = 1.0  # float images are metres
+        color = read_color_image(args.color) if args.color else None
+        if color is not None and color.shape[:2] != depth.shape:
+            raise CommandError(
+                f"colour image {args.color} is {color.shape[1]}x{color.shape[0]} but the depth "
+                f"image is {width}x{height}; give a registered colour image of the same size."
+            )
+        frame = RGBDFrame(depth, intrinsics, sensor_id=source.stem, depth_scale=scale, color=color)
+    cloud = backproject(frame.depth_m(), frame.intrinsics)
+    colors = (
+        frame.color
+        if frame.color is not None and frame.color.shape[:2] == frame.depth.shape
+        else None
+    )
+    write_pcd(args.out, cloud, colors)
+    valid = int(np.count_nonzero(np.isfinite(cloud[..., 2])))
+    height, width = frame.depth.shape
+    if args.json:
+        emit_json(
+            {
+                "out": args.out,
+                "points": valid,
+                "width": width,
+                "height": height,
+                "color": colors is not None,
+            }
+        )
+    else:
+        info(f"wrote {args.out}: {width}x{height} organised cloud, {valid} valid points.")
+    return EXIT_OK
+
+
+def cmd_gui(args: argparse.Namespace) -> int:
+    from app.main import main as gui_main
+
+    argv: list[str] = []
+    if args.screenshot:
+        argv += ["--screenshot", args.screenshot]
+    if args.quit_after is not None:
+        argv += ["--quit-after", str(args.quit_after)]
+    return gui_main(argv)
+
+
+# ------------------------------------------------------------------- parser
+
+
+def _add_json(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--json", action="store_true", help="print one JSON object on stdout (logs go to stderr)"
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="optrack",
+        description="People tracking in networks of RGB-D cameras.",
+        epilog="Each command has its own --help. Figures come from commands with --json.",
+    )
+    parser.add_argument("--version", action="version", version=f"optrack {__version__}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    def command(
+        name: str, help: str, handler: Callable[[argparse.Namespace], int], parent: Any = commands
+    ) -> argparse.ArgumentParser:
+        sub = parent.add_parser(name, help=help, description=help)
+        sub.set_defaults(handler=handler)
+        return sub
+
+    # sim
+    p = command(
+        "sim",
+        "Simulate a venue with walking people and write a recording with ground truth.",
+        _not_available("the simulated venue"),
+    )
+    p.add_argument("scenario", help="scenario name or YAML file (resources/scenarios)")
+    p.add_argument("--out", required=True, help="output recording directory (must be new)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="random seed (the same seed gives the same recording)"
+    )
+    p.add_argument("--seconds", type=float, default=10.0, help="simulated duration, s")
+    p.add_argument("--sensors", type=int, help="number of sensors (default: the scenario's)")
+    p.add_argument("--people", type=int, help="number of people (default: the scenario's)")
+    p.add_argument(
+        "--sensor-model",
+        choices=("kinect2", "kinect1", "sr4500", "stereo"),
+        help="sensor model for every sensor",
+    )
+    _add_json(p)
+
+    # detect
+    p = command(
+        "detect",
+        "Detect people in a point cloud, a recording or a live sensor.",
+        _not_available("the people detector"),
+    )
+    p.add_argument("input", help=".pcd file, recording directory or sensor URI")
+    p.add_argument("--intrinsics", help="fx,fy,cx,cy in pixels (needed for a bare .pcd)")
+    p.add_argument("--ground", help="ground plane a,b,c,d in the camera frame (default: automatic)")
+    p.add_argument("--config", help="YAML parameter file")
+    _add_json(p)
+
+    # eval
+    p = command(
+        "eval",
+        "Track a recording and score it against its ground truth (CLEAR MOT).",
+        _not_available("the tracker evaluation"),
+    )
+    p.add_argument("recording", help="recording directory with ground truth")
+    p.add_argument("--calibration", help="calibration file (default: the recording's true poses)")
+    p.add_argument("--config", help="YAML parameter file")
+    _add_json(p)
+
+    # calibrate
+    p = commands.add_parser(
+        "calibrate",
+        help="Calibrate intrinsics, stereo pairs and the camera network.",
+        description="Calibrate intrinsics, stereo pairs and the camera network.",
+    )
+    p.set_defaults(handler=lambda a: _usage(p))
+    calibrate = p.add_subparsers(dest="calibrate_command", metavar="STEP")
+    q = command(
+        "intrinsics",
+        "Intrinsics of one camera from chessboard images.",
+        _not_available("camera calibration"),
+        calibrate,
+    )
+    q.add_argument("images", nargs="+", help="chessboard images")
+    q.add_argument("--board", required=True, help="inner corners, columns x rows, e.g. 9x6")
+    q.add_argument("--square", type=float, required=True, help="square size, m")
+    _add_json(q)
+    q = command(
+        "stereo",
+        "Relative pose of a stereo pair from chessboard image pairs.",
+        _not_available("camera calibration"),
+        calibrate,
+    )
+    q.add_argument("--board", required=True, help="inner corners, columns x rows, e.g. 9x6")
+    q.add_argument("--square", type=float, required=True, help="square size, m")
+    q.add_argument("--left", nargs="+", required=True, help="left images")
+    q.add_argument("--right", nargs="+", required=True, help="right images (same order)")
+    _add_json(q)
+    q = command(
+        "network",
+        "Calibrate every sensor of a recording (checkerboard, ground).",
+        _not_available("network calibration"),
+        calibrate,
+    )
+    q.add_argument("recording", help="recording of the checkerboard session")
+    q.add_argument("--out", required=True, help="calibration file to write")
+    _add_json(q)
+    q = command(
+        "refine",
+        "Refine a calibration from one person walking.",
+        _not_available("calibration refinement"),
+        calibrate,
+    )
+    q.add_argument("recording", help="recording of one person walking")
+    q.add_argument("--calibration", required=True, help="calibration file to refine")
+    q.add_argument("--out", required=True, help="refined calibration file to write")
+    _add_json(q)
+
+    # bench
+    p = command(
+        "bench",
+        "Measure speed, memory and accuracy of one part of optrack.",
+        _not_available("benchmarks"),
+    )
+    p.add_argument(
+        "what",
+        choices=("sim", "detection", "tracking", "calibration", "e2e"),
+        help="what to measure",
+    )
+    _add_json(p)
+
+    # run
+    p = command(
+        "run",
+        "Run the embedded site (sensors, detectors, tracker) and stream to the outputs.",
+        _not_available("the runtime (detector and tracker nodes)"),
+    )
+    p.add_argument("--headless", action="store_true", help="no window")
+    p.add_argument("--seconds", type=float, help="stop after this many seconds")
+    p.add_argument(
+        "--udp",
+        action="append",
+        metavar="HOST:PORT",
+        help="UDP JSON destination (default 127.0.0.1:21234)",
+    )
+    p.add_argument("--config", help="YAML site configuration")
+
+    # gui
+    p = command("gui", "Open the operator application.", cmd_gui)
+    p.add_argument(
+        "--screenshot", metavar="PNG", help="save a screenshot of the window to this file"
+    )
+    p.add_argument("--quit-after", type=float, metavar="S", help="close the window after S seconds")
+
+    # sensors / record
+    p = command(
+        "sensors",
+        "List the depth cameras attached to this computer.",
+        _not_available("camera discovery"),
+    )
+    _add_json(p)
+    p = command(
+        "record", "Record live sensors into a recording.", _not_available("live camera capture")
+    )
+    p.add_argument(
+        "--sensor",
+        action="append",
+        required=True,
+        metavar="URI",
+        help="sensor URI (repeat for several)",
+    )
+    p.add_argument("--seconds", type=float, required=True, help="how long to record, s")
+    p.add_argument("--out", required=True, help="output recording directory (must be new)")
+    _add_json(p)
+
+    # cloud
+    p = command(
+        "cloud",
+        "Back-project a depth image or a recording frame into a .pcd point cloud.",
+        cmd_cloud,
+    )
+    p.add_argument("input", help="16-bit depth image (TIFF/PNG) or recording directory")
+    p.add_argument(
+        "--intrinsics",
+        help="fx,fy,cx,cy in pixels (required for an image; a recording has its own)",
+    )
+    p.add_argument(
+        "--depth-scale", type=float, help="metres per depth unit (default 0.001: millimetres)"
+    )
+    p.add_argument("--color", help="registered colour image for a depth image (same size)")
+    p.add_argument("--sensor", help="recording: sensor id (default: the first)")
+    p.add_argument(
+        "--frame", type=int, default=0, help="recording: frame number of that sensor (default 0)"
+    )
+    p.add_argument("--out", required=True, help="output .pcd file")
+    _add_json(p)
+
+    # node
+    p = commands.add_parser(
+        "node",
+        help="Run one node of a distributed site.",
+        description="Run one node of a distributed site.",
+    )
+    p.set_defaults(handler=lambda a: _usage(p))
+    node = p.add_subparsers(dest="node_command", metavar="NODE")
+    q = command(
+        "detect",
+        "Detector node: capture one sensor, detect, publish detections.",
+        _not_available("the detector node"),
+        node,
+    )
+    q.add_argument("--sensor", required=True, metavar="URI", help="sensor URI")
+    q.add_argument("--site", required=True, help="site name")
+    q.add_argument("--config", help="YAML configuration")
+    q = command(
+        "track",
+        "Tracker node: all detections in, tracks out.",
+        _not_available("the tracker node"),
+        node,
+    )
+    q.add_argument("--site", required=True, help="site name")
+    q.add_argument("--config", help="YAML configuration")
+    return parser
+
+
+def _usage(parser: argparse.ArgumentParser) -> int:
+    parser.print_help(sys.stderr)
+    return EXIT_USAGE
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "handler", None) is None:
+        parser.print_help(sys.stderr)
+        return EXIT_USAGE
+    names = [args.command] + [
+        getattr(args, k) for k in ("calibrate_command", "node_command") if getattr(args, k, None)
+    ]
+    args.command_name = " ".join(names)
+    started = time.perf_counter()
+    try:
+        return int(args.handler(args) or 0)
+    except KeyboardInterrupt:
+        info(
+            f"optrack {args.command_name}: interrupted after {time.perf_counter() - started:.1f} s."
+        )
+        return 130
+    except UserError as error:
+        info(f"optrack {args.command_name}: {error}")
+        return EXIT_ERROR
+    except OSError as error:
+        target = f" {error.filename}" if error.filename else ""
+        info(f"optrack {args.command_name}: cannot use{target}: {error.strerror or error}.")
+        return EXIT_ERROR
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,342 @@
+"""SE(3) transforms, planes, projection and back-projection.
+
+Poses are 4x4 homogeneous matrices named ``a_T_b``: they map points from
+frame ``b`` into frame ``a`` (``p_a = a_T_b @ p_b``), so that
+``a_T_c = compose(a_T_b, b_T_c)``. Rotations go through SciPy's
+``Rotation``; quaternions are (x, y, z, w) as in SciPy and ROS.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from optrack.errors import UserError
+from optrack.types import Intrinsics
+
+__all__ = [
+    "Plane",
+    "backproject",
+    "backproject_points",
+    "compose",
+    "invert",
+    "make_pose",
+    "pose_from_quaternion",
+    "pose_from_rvec_tvec",
+    "pose_to_quaternion",
+    "pose_to_rvec_tvec",
+    "project",
+    "rotation_angle_deg",
+    "transform_points",
+]
+
+
+# --------------------------------------------------------------------------- SE(3)
+
+
+def make_pose(
+    rotation: np.ndarray | Rotation | None = None, translation: Sequence[float] = (0, 0, 0)
+) -> np.ndarray:
+    """A 4x4 pose from a 3x3 rotation matrix (or SciPy Rotation) and a translation."""
+    pose = np.eye(4)
+    if rotation is not None:
+        pose[:3, :3] = rotation.as_matrix() if isinstance(rotation, Rotation) else rotation
+    pose[:3, 3] = np.asarray(translation, dtype=np.float64)
+    return pose
+
+
+def compose(*poses: np.ndarray) -> np.ndarray:
+    """Chain poses left to right: ``compose(a_T_b, b_T_c) == a_T_c``."""
+    out = np.eye(4)
+    for pose in poses:
+        out = out @ np.asarray(pose, dtype=np.float64)
+    return out
+
+
+def invert(pose: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid transform: ``invert(a_T_b) == b_T_a`` (exact, no matrix inverse)."""
+    pose = np.asarray(pose, dtype=np.float64)
+    rotation_t = pose[:3, :3].T
+    out = np.eye(4)
+    out[:3, :3] = rotation_t
+    out[:3, 3] = -rotation_t @ pose[:3, 3]
+    return out
+
+
+def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply ``a_T_b`` to Nx3 (or ...x3) points in frame b; NaNs stay NaN."""
+    points = np.asarray(points)
+    pose = np.asarray(pose, dtype=np.float64)
+    out = points @ pose[:3, :3].T + pose[:3, 3]
+    return out.astype(np.result_type(points.dtype, np.float32), copy=False)
+
+
+def pose_from_quaternion(
+    quaternion_xyzw: Sequence[float], translation: Sequence[float]
+) -> np.ndarray:
+    """Pose from a quaternion (x, y, z, w) and a translation."""
+    return make_pose(Rotation.from_quat(np.asarray(quaternion_xyzw, dtype=np.float64)), translation)
+
+
+def pose_to_quaternion(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(quaternion (x, y, z, w) with w >= 0, translation) of a pose."""
+    pose = np.asarray(pose, dtype=np.float64)
+    quaternion = Rotation.from_matrix(pose[:3, :3]).as_quat()
+    if quaternion[3] < 0:
+        quaternion = -quaternion
+    return quaternion, pose[:3, 3].copy()
+
+
+def pose_from_rvec_tvec(rvec: Sequence[float], tvec: Sequence[float]) -> np.ndarray:
+    """Pose from OpenCV's Rodrigues vector and translation (e.g. ``cv2.solvePnP``)."""
+    rotation, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
+    return make_pose(rotation, np.asarray(tvec, dtype=np.float64).reshape(3))
+
+
+def pose_to_rvec_tvec(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's (rvec, tvec), each of shape (3,), of a pose."""
+    pose = np.asarray(pose, dtype=np.float64)
+    rvec, _ = cv2.Rodrigues(pose[:3, :3])
+    return rvec.reshape(3), pose[:3, 3].copy()
+
+
+def rotation_angle_deg(a_T_b: np.ndarray, a_T_c: np.ndarray | None = None) -> float:
+    """Rotation angle of a pose, or of the relative rotation between two poses, in degrees."""
+    rotation = np.asarray(a_T_b, dtype=np.float64)[:3, :3]
+    if a_T_c is not None:
+        rotation = rotation.T @ np.asarray(a_T_c, dtype=np.float64)[:3, :3]
+    return float(np.degrees(Rotation.from_matrix(rotation).magnitude()))
+
+
+# -------------------------------------------------------------------------- planes
+
+
+class Plane:
+    """The plane ``a x + b y + c z + d = 0`` with unit normal (a, b, c).
+
+    ``distance`` is signed: positive on the side the normal points to. For a
+    ground plane, the normal points up (towards the camera's people).
+    """
+
+    __slots__ = ("coefficients",)
+
+    def __init__(self, a: float, b: float, c: float, d: float) -> None:
+        coefficients = np.array([a, b, c, d], dtype=np.float64)
+        norm = np.linalg.norm(coefficients[:3])
+        if not np.isfinite(norm) or norm < 1e-12:
+            raise ValueError(f"a plane needs a non-zero normal; got ({a}, {b}, {c}, {d}).")
+        self.coefficients = coefficients / norm
+
+    # construction ---------------------------------------------------------
+    @classmethod
+    def from_coefficients(cls, coefficients: Sequence[float]) -> Plane:
+        values = [float(v) for v in coefficients]
+        if len(values) != 4:
+            raise ValueError(f"a plane is four numbers a,b,c,d; got {len(values)}.")
+        return cls(*values)
+
+    @classmethod
+    def parse(cls, text: str) -> Plane:
+        """Parse ``"a,b,c,d"`` as given on the command line."""
+        try:
+            return cls.from_coefficients([float(p) for p in text.split(",") if p.strip()])
+        except ValueError as error:
+            raise UserError(
+                f"ground plane must be four numbers 'a,b,c,d'; got '{text}' ({error})"
+            ) from None
+
+    @classmethod
+    def from_point_normal(cls, point: Sequence[float], normal: Sequence[float]) -> Plane:
+        normal = np.asarray(normal, dtype=np.float64)
+        return cls(*normal, -float(normal @ np.asarray(point, dtype=np.float64)))
+
+    @classmethod
+    def from_points(cls, p1: Sequence[float], p2: Sequence[float], p3: Sequence[float]) -> Plane:
+        """The plane through three points (normal by the right-hand rule p1->p2->p3)."""
+        p1, p2, p3 = (np.asarray(p, dtype=np.float64) for p in (p1, p2, p3))
+        normal = np.cross(p2 - p1, p3 - p1)
+        if np.linalg.norm(normal) < 1e-9:
+            raise ValueError("the three points are on one line; pick points that span a plane.")
+        return cls.from_point_normal(p1, normal)
+
+    @classmethod
+    def fit(cls, points: np.ndarray) -> Plane:
+        """Total-least-squares plane through Nx3 points (NaNs ignored), by SVD.
+
+        Use :meth:`segment` when the points contain outliers.
+        """
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        points = points[np.all(np.isfinite(points), axis=1)]
+        if len(points) < 3:
+            raise ValueError(f"fitting a plane needs at least 3 valid points; got {len(points)}.")
+        centroid = points.mean(axis=0)
+        _, singular, vt = np.linalg.svd(points - centroid, full_matrices=False)
+        if singular[1] < 1e-9 * max(singular[0], 1e-12):
+            raise ValueError("the points are on one line; a plane cannot be fitted.")
+        return cls.from_point_normal(centroid, vt[2])
+
+    @classmethod
+    def segment(
+        cls,
+        points: np.ndarray,
+        distance_threshold: float,
+        ransac_n: int = 3,
+        iterations: int = 1000,
+        seed: int | None = 0,
+    ) -> tuple[Plane, np.ndarray]:
+        """Robust plane by Open3D's RANSAC: (plane, indices of the inliers in ``points``)."""
+        import open3d as o3d
+
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        valid = np.flatnonzero(np.all(np.isfinite(points), axis=1))
+        if len(valid) < ransac_n:
+            raise ValueError(
+                f"segmenting a plane needs at least {ransac_n} valid points; got {len(valid)}."
+            )
+        if seed is not None:
+            o3d.utility.random.seed(seed)
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[valid]))
+        model, inliers = cloud.segment_plane(distance_threshold, ransac_n, iterations)
+        return cls.from_coefficients(model), valid[np.asarray(inliers, dtype=np.int64)]
+
+    # queries --------------------------------------------------------------
+    @property
+    def normal(self) -> np.ndarray:
+        return self.coefficients[:3].copy()
+
+    @property
+    def d(self) -> float:
+        return float(self.coefficients[3])
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """Signed distances (metres) of ...x3 points; NaN for NaN points."""
+        points = np.asarray(points)
+        return points @ self.coefficients[:3] + self.coefficients[3]
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Orthogonal projection of ...x3 points onto the plane."""
+        points = np.asarray(points, dtype=np.float64)
+        return points - self.distance(points)[..., None] * self.coefficients[:3]
+
+    def flipped(self) -> Plane:
+        return Plane(*(-self.coefficients))
+
+    def oriented_towards(self, point: Sequence[float]) -> Plane:
+        """The same plane with its normal pointing to the side of ``point``."""
+        return self if self.distance(np.asarray(point, dtype=np.float64)) >= 0 else self.flipped()
+
+    def transform(self, a_T_b: np.ndarray) -> Plane:
+        """This plane (given in frame b) expressed in frame a."""
+        pose = np.asarray(a_T_b, dtype=np.float64)
+        normal = pose[:3, :3] @ self.coefficients[:3]
+        return Plane(*normal, self.coefficients[3] - normal @ pose[:3, 3])
+
+    def angle_deg(self, other: Plane) -> float:
+        """Angle between the two planes' normals, degrees in [0, 180]."""
+        cosine = float(np.clip(self.coefficients[:3] @ other.coefficients[:3], -1.0, 1.0))
+        return float(np.degrees(np.arccos(cosine)))
+
+    def offset(self, other: Plane, at: Sequence[float] = (0.0, 0.0, 0.0)) -> float:
+        """Distance (metres) from ``at`` projected onto this plane, to ``other``.
+
+        For two near-parallel planes this is how far apart they are near
+        ``at`` (the origin by default: for a camera-frame ground plane, under
+        the camera).
+        """
+        foot = self.project(np.asarray(at, dtype=np.float64))
+        return float(abs(other.distance(foot)))
+
+    def to_list(self) -> list[float]:
+        return [float(v) for v in self.coefficients]
+
+    def __iter__(self):  # noqa: ANN204 - lets a, b, c, d = plane
+        return iter(self.to_list())
+
+    def __repr__(self) -> str:
+        a, b, c, d = self.coefficients
+        return f"Plane({a:.6g}, {b:.6g}, {c:.6g}, {d:.6g})"
+
+
+# ----------------------------------------------------- projection, back-projection
+
+
+def _pixel_rays(intrinsics: Intrinsics, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised image coordinates (x/z, y/z) of every pixel centre, HxW each."""
+    u = np.arange(width, dtype=np.float64)
+    v = np.arange(height, dtype=np.float64)
+    if not intrinsics.has_distortion:
+        x = (u - intrinsics.cx) / intrinsics.fx
+        y = (v - intrinsics.cy) / intrinsics.fy
+        return np.broadcast_to(x, (height, width)), np.broadcast_to(y[:, None], (height, width))
+    uu, vv = np.meshgrid(u, v)
+    pixels = np.stack([uu.ravel(), vv.ravel()], axis=1).reshape(-1, 1, 2)
+    normalised = cv2.undistortPoints(pixels, intrinsics.K, intrinsics.dist_coeffs).reshape(
+        height, width, 2
+    )
+    return normalised[..., 0], normalised[..., 1]
+
+
+def backproject(depth_m: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
+    """Organised cloud (HxWx3 float32, camera frame) from a depth image in metres.
+
+    Invalid pixels (0, negative or NaN depth) give NaN points, as in PCL's
+    organised clouds. Distortion, when the intrinsics have it, is undone.
+    """
+    depth = np.asarray(depth_m)
+    if depth.ndim != 2:
+        raise ValueError(f"depth must be an HxW image; got shape {depth.shape}.")
+    height, width = depth.shape
+    z = depth.astype(np.float32, copy=True)
+    z[~(z > 0)] = np.nan
+    x_over_z, y_over_z = _pixel_rays(intrinsics, height, width)
+    cloud = np.empty((height, width, 3), dtype=np.float32)
+    np.multiply(x_over_z, z, out=cloud[..., 0], casting="unsafe")
+    np.multiply(y_over_z, z, out=cloud[..., 1], casting="unsafe")
+    cloud[..., 2] = z
+    return cloud
+
+
+def backproject_points(
+    depth_m: np.ndarray, intrinsics: Intrinsics, stride: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
+    """Unorganised cloud: (Nx3 float32 valid points, Nx2 int (row, col) pixel indices).
+
+    ``stride`` subsamples rows and columns (OpenPTrack's sampling factor).
+    """
+    depth = np.asarray(depth_m)
+    if stride < 1:
+        raise ValueError(f"stride must be >= 1; got {stride}.")
+    rows, cols = np.nonzero(depth[::stride, ::stride] > 0)
+    rows *= stride
+    cols *= stride
+    z = depth[rows, cols].astype(np.float64)
+    if intrinsics.has_distortion:
+        pixels = np.stack([cols, rows], axis=1).astype(np.float64).reshape(-1, 1, 2)
+        normalised = cv2.undistortPoints(pixels, intrinsics.K, intrinsics.dist_coeffs).reshape(
+            -1, 2
+        )
+        x, y = normalised[:, 0] * z, normalised[:, 1] * z
+    else:
+        x = (cols - intrinsics.cx) * z / intrinsics.fx
+        y = (rows - intrinsics.cy) * z / intrinsics.fy
+    points = np.stack([x, y, z], axis=1).astype(np.float32)
+    return points, np.stack([rows, cols], axis=1)
+
+
+def project(points: np.ndarray, intrinsics: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel coordinates (Nx2 float, u then v) of Nx3 camera-frame points, and a mask of
+    the points in front of the camera (z > 0). Distortion is applied when present."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    in_front = points[:, 2] > 0
+    if intrinsics.has_distortion:
+        pixels, _ = cv2.projectPoints(
+            points, np.zeros(3), np.zeros(3), intrinsics.K, intrinsics.dist_coeffs
+        )
+        return pixels.reshape(-1, 2), in_front
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = intrinsics.fx * points[:, 0] / points[:, 2] + intrinsics.cx
+        v = intrinsics.fy * points[:, 1] / points[:, 2] + intrinsics.cy
+    return np.stack([u, v], axis=1), in_front

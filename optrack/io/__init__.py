@@ -1,0 +1,1 @@
+"""Reading and writing files: point clouds (PCD), depth images, atomic writes."""

@@ -1,0 +1,196 @@
+"""Read recordings frame by frame, all sensors merged in timestamp order."""
+
+from __future__ import annotations
+
+import heapq
+import os
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+import cv2
+import msgspec
+import numpy as np
+import yaml
+
+from optrack.recording.format import (
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    GROUND_TRUTH,
+    INDEX,
+    MANIFEST,
+    SENSORS_DIR,
+    STREAMS,
+    GroundTruth,
+    IndexEntry,
+    Manifest,
+    RecordingError,
+    SensorInfo,
+)
+from optrack.types import RGBDFrame
+
+__all__ = ["Recording", "is_recording"]
+
+
+def is_recording(path: str | os.PathLike[str]) -> bool:
+    """True when ``path`` is a directory holding a recording manifest."""
+    return (Path(path) / MANIFEST).is_file()
+
+
+def _read_jsonl(path: Path, kind: type[msgspec.Struct]) -> Iterator[msgspec.Struct]:
+    """Lines of an append-only JSONL file; a last line cut short by a killed writer is skipped."""
+    decoder = msgspec.json.Decoder(kind)
+    with path.open("rb") as handle:
+        number = 0
+        for raw in handle:
+            number += 1
+            if not raw.endswith(b"\n"):
+                return  # the writer was killed while writing this line
+            if not raw.strip():
+                continue
+            try:
+                yield decoder.decode(raw)
+            except msgspec.DecodeError as error:
+                raise RecordingError(f"{path} line {number} is damaged ({error}).") from None
+
+
+class Recording:
+    """A recording opened for reading. Cheap to open: nothing but the manifest is read."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        if not self.path.exists():
+            raise RecordingError(f"recording {self.path} does not exist; check the path.")
+        if not self.path.is_dir():
+            raise RecordingError(
+                f"{self.path} is a file, not a recording directory (record one with 'optrack record' "
+                "or 'optrack sim')."
+            )
+        manifest_path = self.path / MANIFEST
+        if not manifest_path.is_file():
+            raise RecordingError(
+                f"{self.path} is not an optrack recording (it has no {MANIFEST}); record one with "
+                "'optrack record' or 'optrack sim'."
+            )
+        try:
+            data = yaml.safe_load(manifest_path.read_text(encoding="utf-8"))
+        except yaml.YAMLError:
+            raise RecordingError(f"{manifest_path} is damaged (not valid YAML).") from None
+        if not isinstance(data, dict) or data.get("format") != FORMAT_NAME:
+            raise RecordingError(
+                f"{self.path} is not an optrack recording ({MANIFEST} does not say "
+                f"format: {FORMAT_NAME})."
+            )
+        version = data.get("version")
+        if version != FORMAT_VERSION:
+            raise RecordingError(
+                f"recording {self.path} has format version {version}; this optrack reads version "
+                f"{FORMAT_VERSION}. Use a matching optrack to convert it."
+            )
+        try:
+            self.manifest: Manifest = msgspec.convert(data, Manifest)
+        except msgspec.ValidationError as error:
+            raise RecordingError(f"{manifest_path} is damaged ({error}).") from None
+        self.sensors: dict[str, SensorInfo] = {s.id: s for s in self.manifest.sensors}
+
+    # ------------------------------------------------------------------ index
+    @property
+    def sensor_ids(self) -> list[str]:
+        return list(self.sensors)
+
+    def _sensor(self, sensor_id: str) -> SensorInfo:
+        try:
+            return self.sensors[sensor_id]
+        except KeyError:
+            raise RecordingError(
+                f"recording {self.path} has no sensor '{sensor_id}' (it has: {', '.join(self.sensors)})."
+            ) from None
+
+    def index(self, sensor_id: str) -> Iterator[IndexEntry]:
+        """The index entries of one sensor, in time order."""
+        self._sensor(sensor_id)
+        path = self.path / SENSORS_DIR / sensor_id / INDEX
+        if not path.is_file():
+            return iter(())
+        return _read_jsonl(path, IndexEntry)  # type: ignore[return-value]
+
+    def count(self, sensor_id: str) -> int:
+        return sum(1 for _ in self.index(sensor_id))
+
+    @property
+    def has_ground_truth(self) -> bool:
+        return self.manifest.ground_truth and (self.path / GROUND_TRUTH).is_file()
+
+    def ground_truth(self) -> Iterator[GroundTruth]:
+        """Ground truth instants in time order (empty when the recording has none)."""
+        path = self.path / GROUND_TRUTH
+        if not path.is_file():
+            return iter(())
+        return _read_jsonl(path, GroundTruth)  # type: ignore[return-value]
+
+    # ----------------------------------------------------------------- frames
+    def load(
+        self, sensor_id: str, entry: IndexEntry, streams: Iterable[str] = STREAMS
+    ) -> RGBDFrame:
+        """Load the images of one index entry as a frame."""
+        info = self._sensor(sensor_id)
+        streams = set(streams)
+        root = self.path / SENSORS_DIR / sensor_id
+        images: dict[str, np.ndarray | None] = {}
+        for kind in STREAMS:
+            relative = getattr(entry, kind)
+            if relative is None or (kind != "depth" and kind not in streams):
+                images[kind] = None
+                continue
+            file = root / relative
+            image = cv2.imread(str(file), cv2.IMREAD_UNCHANGED)
+            if image is None:
+                raise RecordingError(
+                    f"recording {self.path} is damaged: {file.relative_to(self.path)} is missing or "
+                    "unreadable."
+                )
+            if kind == "color":
+                image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+            images[kind] = image
+        return RGBDFrame(
+            depth=images["depth"],  # type: ignore[arg-type]
+            intrinsics=info.intrinsics,
+            sensor_id=sensor_id,
+            timestamp=entry.t,
+            depth_scale=info.depth_scale,
+            color=images["color"],
+            infrared=images["infrared"],
+            confidence=images["confidence"],
+            color_intrinsics=info.color_intrinsics,
+            seq=entry.seq,
+        )
+
+    def frame(self, sensor_id: str, position: int) -> RGBDFrame:
+        """The ``position``-th frame of a sensor (0-based)."""
+        for i, entry in enumerate(self.index(sensor_id)):
+            if i == position:
+                return self.load(sensor_id, entry)
+        raise RecordingError(
+            f"sensor '{sensor_id}' of recording {self.path} has no frame {position} "
+            f"(it has {self.count(sensor_id)})."
+        )
+
+    def frames(
+        self, sensors: Iterable[str] | None = None, streams: Iterable[str] = STREAMS
+    ) -> Iterator[RGBDFrame]:
+        """All frames of the chosen sensors in timestamp order, one at a time."""
+        chosen = list(sensors) if sensors is not None else self.sensor_ids
+        streams = tuple(streams)
+        for sid in chosen:
+            self._sensor(sid)
+
+        def keyed(sid: str) -> Iterator[tuple[float, str, IndexEntry]]:
+            for entry in self.index(sid):
+                yield entry.t, sid, entry
+
+        for _, sid, entry in heapq.merge(
+            *(keyed(s) for s in chosen), key=lambda item: (item[0], item[1])
+        ):
+            yield self.load(sid, entry, streams)
+
+    def __repr__(self) -> str:
+        return f"Recording({str(self.path)!r}, sensors={self.sensor_ids})"
