@@ -10,6 +10,7 @@ object on stdout; progress and messages go to stderr.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 import time
@@ -39,14 +40,29 @@ def info(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
-def _not_available(what: str) -> Callable[[argparse.Namespace], int]:
-    def handler(args: argparse.Namespace) -> int:
+Handler = Callable[[argparse.Namespace], int]
+
+
+class NotAvailable:
+    """The handler of a command whose part of optrack is not built yet."""
+
+    def __init__(self, what: str) -> None:
+        self.what = what
+
+    def __call__(self, args: argparse.Namespace) -> int:
         info(
-            f"optrack {args.command_name}: not available yet; {what} is not built into this version."
+            f"optrack {args.command_name}: not available yet; {self.what} is not built into this version."
         )
         return EXIT_UNAVAILABLE
 
-    return handler
+
+def resolve(handler: str | Handler) -> Handler:
+    """A handler given as ``"package.module:function"`` is imported only when its
+    command runs, so that ``optrack --help`` stays fast."""
+    if not isinstance(handler, str):
+        return handler
+    module_name, _, function = handler.partition(":")
+    return getattr(importlib.import_module(module_name), function)
 
 
 # ------------------------------------------------------------------ commands
@@ -120,6 +136,24 @@ def cmd_cloud(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# Each benchmark is a handler "module:function" taking the parsed arguments;
+# None until the part it measures is built.
+BENCHES: dict[str, str | None] = {
+    "sim": None,
+    "detection": None,
+    "tracking": None,
+    "calibration": None,
+    "e2e": None,
+}
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    handler = BENCHES[args.what]
+    if handler is None:
+        return NotAvailable(f"the part that 'bench {args.what}' measures")(args)
+    return int(resolve(handler)(args) or 0)
+
+
 def cmd_gui(args: argparse.Namespace) -> int:
     from app.main import main as gui_main
 
@@ -160,7 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = command(
         "sim",
         "Simulate a venue with walking people and write a recording with ground truth.",
-        _not_available("the simulated venue"),
+        NotAvailable("the simulated venue"),
     )
     p.add_argument("scenario", help="scenario name or YAML file (resources/scenarios)")
     p.add_argument("--out", required=True, help="output recording directory (must be new)")
@@ -181,7 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = command(
         "detect",
         "Detect people in a point cloud, a recording or a live sensor.",
-        _not_available("the people detector"),
+        NotAvailable("the people detector"),
     )
     p.add_argument("input", help=".pcd file, recording directory or sensor URI")
     p.add_argument("--intrinsics", help="fx,fy,cx,cy in pixels (needed for a bare .pcd)")
@@ -193,7 +227,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = command(
         "eval",
         "Track a recording and score it against its ground truth (CLEAR MOT).",
-        _not_available("the tracker evaluation"),
+        NotAvailable("the tracker evaluation"),
     )
     p.add_argument("recording", help="recording directory with ground truth")
     p.add_argument("--calibration", help="calibration file (default: the recording's true poses)")
@@ -211,7 +245,7 @@ def build_parser() -> argparse.ArgumentParser:
     q = command(
         "intrinsics",
         "Intrinsics of one camera from chessboard images.",
-        _not_available("camera calibration"),
+        NotAvailable("camera calibration"),
         calibrate,
     )
     q.add_argument("images", nargs="+", help="chessboard images")
@@ -221,7 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
     q = command(
         "stereo",
         "Relative pose of a stereo pair from chessboard image pairs.",
-        _not_available("camera calibration"),
+        NotAvailable("camera calibration"),
         calibrate,
     )
     q.add_argument("--board", required=True, help="inner corners, columns x rows, e.g. 9x6")
@@ -232,7 +266,7 @@ def build_parser() -> argparse.ArgumentParser:
     q = command(
         "network",
         "Calibrate every sensor of a recording (checkerboard, ground).",
-        _not_available("network calibration"),
+        NotAvailable("network calibration"),
         calibrate,
     )
     q.add_argument("recording", help="recording of the checkerboard session")
@@ -241,7 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
     q = command(
         "refine",
         "Refine a calibration from one person walking.",
-        _not_available("calibration refinement"),
+        NotAvailable("calibration refinement"),
         calibrate,
     )
     q.add_argument("recording", help="recording of one person walking")
@@ -253,11 +287,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = command(
         "bench",
         "Measure speed, memory and accuracy of one part of optrack.",
-        _not_available("benchmarks"),
+        cmd_bench,
     )
     p.add_argument(
         "what",
-        choices=("sim", "detection", "tracking", "calibration", "e2e"),
+        choices=tuple(BENCHES),
         help="what to measure",
     )
     _add_json(p)
@@ -266,7 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = command(
         "run",
         "Run the embedded site (sensors, detectors, tracker) and stream to the outputs.",
-        _not_available("the runtime (detector and tracker nodes)"),
+        NotAvailable("the runtime (detector and tracker nodes)"),
     )
     p.add_argument("--headless", action="store_true", help="no window")
     p.add_argument("--seconds", type=float, help="stop after this many seconds")
@@ -289,11 +323,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = command(
         "sensors",
         "List the depth cameras attached to this computer.",
-        _not_available("camera discovery"),
+        NotAvailable("camera discovery"),
     )
     _add_json(p)
     p = command(
-        "record", "Record live sensors into a recording.", _not_available("live camera capture")
+        "record", "Record live sensors into a recording.", NotAvailable("live camera capture")
     )
     p.add_argument(
         "--sensor",
@@ -339,7 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
     q = command(
         "detect",
         "Detector node: capture one sensor, detect, publish detections.",
-        _not_available("the detector node"),
+        NotAvailable("the detector node"),
         node,
     )
     q.add_argument("--sensor", required=True, metavar="URI", help="sensor URI")
@@ -348,7 +382,7 @@ def build_parser() -> argparse.ArgumentParser:
     q = command(
         "track",
         "Tracker node: all detections in, tracks out.",
-        _not_available("the tracker node"),
+        NotAvailable("the tracker node"),
         node,
     )
     q.add_argument("--site", required=True, help="site name")
@@ -373,7 +407,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.command_name = " ".join(names)
     started = time.perf_counter()
     try:
-        return int(args.handler(args) or 0)
+        return int(resolve(args.handler)(args) or 0)
     except KeyboardInterrupt:
         info(
             f"optrack {args.command_name}: interrupted after {time.perf_counter() - started:.1f} s."

@@ -1,0 +1,58 @@
+"""The sensor interface: anything that yields :class:`~optrack.types.RGBDFrame`.
+
+Nothing downstream may tell a simulated sensor, a recording and a camera
+apart: they all open, read frames in time order, describe themselves with a
+:class:`~optrack.recording.SensorInfo`, and close.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Iterator
+
+from optrack.errors import UserError
+from optrack.recording.format import SensorInfo
+from optrack.types import RGBDFrame
+
+
+class SensorError(UserError):
+    """A sensor that cannot be opened or read (unplugged, busy, unknown URI)."""
+
+
+class Sensor(abc.ABC):
+    """One RGB-D source.
+
+    ``read()`` blocks until the next frame and returns it, or returns None
+    when the source has ended (a recording played to its end, a simulation
+    past its duration). A live sensor that fails raises :class:`SensorError`
+    with a sentence saying what to do. Sensors are context managers and
+    iterables of frames.
+    """
+
+    uri: str = ""
+
+    @property
+    @abc.abstractmethod
+    def info(self) -> SensorInfo:
+        """Id, model, intrinsics (and true pose when known) of this sensor."""
+
+    @abc.abstractmethod
+    def read(self) -> RGBDFrame | None:
+        """The next frame, or None at the end of the source."""
+
+    def open(self) -> None:  # noqa: B027 - optional hook
+        """Acquire the device (called by ``__enter__``); idempotent."""
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Release the device; idempotent."""
+
+    def __enter__(self) -> Sensor:
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __iter__(self) -> Iterator[RGBDFrame]:
+        while (frame := self.read()) is not None:
+            yield frame
