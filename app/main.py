@@ -10,9 +10,15 @@ from app.display import HEADLESS_HINT, display_problem
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="optrack gui", description="Open the operator application.")
-    parser.add_argument("--screenshot", metavar="PNG", help="save a screenshot of the window to this file")
-    parser.add_argument("--quit-after", type=float, metavar="S", help="close the window after S seconds")
+    parser = argparse.ArgumentParser(
+        prog="optrack gui", description="Open the operator application."
+    )
+    parser.add_argument(
+        "--screenshot", metavar="PNG", help="save a screenshot of the window to this file"
+    )
+    parser.add_argument(
+        "--quit-after", type=float, metavar="S", help="close the window after S seconds"
+    )
     args = parser.parse_args(argv)
 
     problem = display_problem()
@@ -33,7 +39,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     def screenshot() -> None:
         if not window.grab().save(args.screenshot):
-            print(f"optrack gui: could not save the screenshot to {args.screenshot}; check that its folder exists and is writable.", file=sys.stderr)
+            print(
+                f"optrack gui: could not save the screenshot to {args.screenshot}; check that its folder exists and is writable.",
+                file=sys.stderr,
+            )
             status["code"] = 1
 
     if args.quit_after is not None:
