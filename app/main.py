@@ -9,6 +9,18 @@ from collections.abc import Sequence
 from app.display import HEADLESS_HINT, display_problem
 
 
+def configure_qt() -> None:
+    """Settings Qt needs before the QApplication exists.
+
+    All OpenGL views share one context group: pyqtgraph compiles each shader
+    once per process, so a second 3D view (or a view re-created) must be able
+    to use the first one's programs.
+    """
+    from PySide6.QtCore import QCoreApplication, Qt
+
+    QCoreApplication.setAttribute(Qt.ApplicationAttribute.AA_ShareOpenGLContexts)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="optrack gui", description="Open the operator application."
@@ -31,6 +43,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     from app.main_window import MainWindow
 
+    configure_qt()
     app = QApplication.instance() or QApplication([sys.argv[0]])
     app.setApplicationName("optrack")
     window = MainWindow()

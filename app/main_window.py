@@ -1,28 +1,246 @@
-"""The operator's main window."""
+"""The operator's main window: one window for the whole site.
+
+The window only shows what its :class:`~app.source.SiteSource` reports and
+sends the operator's requests back to it; it computes nothing a node
+computes. Docks: Sensors, Parameters (left), World 3D (centre), Top view and
+Tracks (right), Log and Outputs (bottom).
+"""
 
 from __future__ import annotations
 
-from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QLabel, QMainWindow, QVBoxLayout, QWidget
+import logging
+from typing import Any
 
+import numpy as np
+from PySide6.QtCore import Qt
+from PySide6.QtGui import QAction, QKeySequence
+from PySide6.QtWidgets import QDockWidget, QLabel, QMainWindow, QWidget
+
+from app.source import NO_SITE, SiteSource
+from app.view_params import VIEW_PARAMS
+from app.widgets.log_panel import LogPanel, QtLogHandler
+from app.widgets.outputs_panel import OutputsPanel
+from app.widgets.parameters_panel import ParametersPanel
+from app.widgets.sensors_panel import SensorsPanel
+from app.widgets.top_view import TopView
+from app.widgets.tracks_table import TracksTable
 from app.widgets.world_view import WorldView
 from optrack import __version__
+from optrack.geometry import backproject_points, transform_points
+from optrack.params import REGISTRY, Schema
+from optrack.types import DetectionBatch, NetworkCalibration, RGBDFrame, TrackBatch
+
+# The stages the site's nodes run, shown before a site says which it has.
+NODE_STAGES = ("detection", "tracking", "appearance", "smoothing")
+
+
+def node_schemas() -> dict[str, Schema]:
+    """The registered schemas of the detector and tracker nodes' stages."""
+    import optrack.detection.params  # noqa: F401 - registers the detection schema
+    import optrack.tracking.params  # noqa: F401 - registers the tracking schemas
+
+    return {stage: REGISTRY[stage] for stage in NODE_STAGES if stage in REGISTRY}
+
+
+def preview_cloud(
+    frame: RGBDFrame, world_T_camera: np.ndarray, stride: int
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """A preview frame's points in the world (every ``stride``-th pixel) and their colours."""
+    points, pixels = backproject_points(frame.depth_m(), frame.intrinsics, stride)
+    colors = None
+    if frame.color is not None and frame.color.shape[:2] == frame.depth.shape:
+        colors = frame.color[pixels[:, 0], pixels[:, 1]]
+    return transform_points(world_T_camera, points), colors
 
 
 class MainWindow(QMainWindow):
-    """One window for the whole site: the world in 3D, and (as they land) the
-    sensors, tracks, outputs, log and the calibration wizard."""
+    """Docks around the 3D world; everything fed by one :class:`SiteSource`."""
 
-    def __init__(self) -> None:
+    def __init__(self, source: SiteSource | None = None) -> None:
         super().__init__()
         self.setWindowTitle(f"optrack {__version__}")
         self.resize(1280, 800)
-        central = QWidget(self)
-        layout = QVBoxLayout(central)
-        layout.setContentsMargins(0, 0, 0, 0)
-        self.world = WorldView(parent=central)
-        layout.addWidget(self.world)
-        self.setCentralWidget(central)
-        self.site_label = QLabel("No site connected")
+        self.view_params = VIEW_PARAMS.create()
+        view = self.view_params
+        self.world = WorldView(
+            trail_seconds=view.trail_seconds, track_radius=view.track_radius, parent=self
+        )
+        self.setCentralWidget(self.world)
+        self.sensors = SensorsPanel(stale_after=view.status_timeout)
+        self.parameters = ParametersPanel()
+        self.top_view = TopView(trail_seconds=view.trail_seconds)
+        self.tracks_table = TracksTable()
+        self.log_panel = LogPanel(max_lines=view.log_lines)
+        self.outputs = OutputsPanel()
+        self.docks: dict[str, QDockWidget] = {}
+        left, right, bottom = (
+            Qt.DockWidgetArea.LeftDockWidgetArea,
+            Qt.DockWidgetArea.RightDockWidgetArea,
+            Qt.DockWidgetArea.BottomDockWidgetArea,
+        )
+        self._dock("Sensors", self.sensors, left)
+        self._dock("Parameters", self.parameters, left)
+        self._dock("Top view", self.top_view, right)
+        self._dock("Tracks", self.tracks_table, right)
+        self._dock("Log", self.log_panel, bottom)
+        self._dock("Outputs", self.outputs, bottom)
+        self.tabifyDockWidget(self.docks["Sensors"], self.docks["Parameters"])
+        self.docks["Sensors"].raise_()
+        self.splitDockWidget(self.docks["Top view"], self.docks["Tracks"], Qt.Orientation.Vertical)
+        self.tabifyDockWidget(self.docks["Log"], self.docks["Outputs"])
+        self.docks["Log"].raise_()
+        self.resizeDocks(
+            [self.docks["Sensors"], self.docks["Top view"]], [330, 440], Qt.Orientation.Horizontal
+        )
+        self.resizeDocks(
+            [self.docks["Top view"], self.docks["Tracks"]], [420, 260], Qt.Orientation.Vertical
+        )
+        self.resizeDocks([self.docks["Log"]], [150], Qt.Orientation.Vertical)
+        self.setCorner(Qt.Corner.BottomRightCorner, right)
+        self.setCorner(Qt.Corner.BottomLeftCorner, left)
+        self.site_label = QLabel(NO_SITE)
         self.site_label.setAlignment(Qt.AlignmentFlag.AlignLeft)
         self.statusBar().addWidget(self.site_label)
+        self._menus()
+
+        self.parameters.set_schemas(node_schemas())
+        self.parameters.set_schemas({"view": VIEW_PARAMS}, {"view": view.as_dict()}, local=True)
+        self.parameters.changed.connect(self._parameters_changed)
+        self.parameters.problem.connect(lambda text: self.log_panel.append("warning", text))
+        self.outputs.add_requested.connect(
+            lambda kind, address: self.source.add_output(kind, address)
+        )
+        self.outputs.remove_requested.connect(
+            lambda kind, address: self.source.remove_output(kind, address)
+        )
+        self.outputs.enable_requested.connect(
+            lambda kind, address, on: self.source.enable_output(kind, address, on)
+        )
+        self.log_handler = QtLogHandler(logging.WARNING)
+        self.log_handler.message.connect(self.log_panel.append)
+        for name in ("optrack", "app"):
+            logging.getLogger(name).addHandler(self.log_handler)
+
+        self.calibration: NetworkCalibration | None = None
+        self._connections: list[tuple[Any, Any]] = []
+        self.source = SiteSource(self)
+        self.set_source(source if source is not None else self.source)
+
+    def _dock(self, title: str, widget: QWidget, area: Qt.DockWidgetArea) -> None:
+        dock = QDockWidget(title, self)
+        dock.setObjectName(title.replace(" ", "_").lower())
+        dock.setWidget(widget)
+        self.addDockWidget(area, dock)
+        self.docks[title] = dock
+
+    def _menus(self) -> None:
+        file_menu = self.menuBar().addMenu("&File")
+        load = QAction("&Load parameter preset…", self)
+        load.triggered.connect(self.parameters._ask_load)
+        save = QAction("&Save parameter preset…", self)
+        save.triggered.connect(self.parameters._ask_save)
+        quit_action = QAction("&Quit", self)
+        quit_action.setShortcut(QKeySequence.StandardKey.Quit)
+        quit_action.triggered.connect(self.close)
+        for action in (load, save):
+            file_menu.addAction(action)
+        file_menu.addSeparator()
+        file_menu.addAction(quit_action)
+        view_menu = self.menuBar().addMenu("&View")
+        for dock in self.docks.values():
+            view_menu.addAction(dock.toggleViewAction())
+
+    # ------------------------------------------------------------------ source
+    def set_source(self, source: SiteSource) -> None:
+        """Listen to ``source`` (and stop listening to the previous one)."""
+        for signal, slot in self._connections:
+            signal.disconnect(slot)
+        self.source = source
+        self._connections = [
+            (source.tracks, self.show_tracks),
+            (source.calibration, self.show_calibration),
+            (source.status, self.show_status),
+            (source.preview, self.show_preview),
+            (source.schemas, self.show_schemas),
+            (source.log, self.log_panel.append),
+            (source.connection, self.show_connection),
+        ]
+        for signal, slot in self._connections:
+            signal.connect(slot)
+        self.show_connection(source.describe() if source.connected else "")
+        self.log_panel.append("info", f"{source.describe()}.")
+
+    def show_connection(self, description: str) -> None:
+        connected = bool(description)
+        text = description if connected else NO_SITE
+        self.site_label.setText(text)
+        self.top_view.overlay.show_message("" if connected else NO_SITE)
+        self.world.overlay.show_message("" if connected else NO_SITE)
+        self.outputs.set_connected(connected, text)
+        self.tracks_table.set_site(text if not connected else f"{text}: waiting for tracks")
+
+    def show_tracks(self, batch: TrackBatch) -> None:
+        self.tracks_table.set_batch(batch)
+        self.top_view.set_batch(batch)
+        self.world.set_batch(batch)
+
+    def show_calibration(self, calibration: NetworkCalibration) -> None:
+        self.calibration = calibration
+        self._draw_calibration()
+        for sensor_id in sorted(calibration.sensors):
+            self.sensors.add_sensor(sensor_id)
+
+    def _draw_calibration(self) -> None:
+        if self.calibration is None:
+            return
+        detection = self.parameters.values.get("detection")
+        max_depth = (
+            float(detection.max_distance)
+            if detection is not None
+            else self.view_params.coverage_depth
+        )
+        self.top_view.set_calibration(self.calibration, max_depth)
+        self.world.set_calibration(self.calibration, self.view_params.frustum_depth)
+
+    def show_status(self, node: str, values: dict) -> None:
+        self.sensors.set_status(node, values)
+        self.outputs.set_status(node, values)
+        for stage, stage_values in (values.get("params") or {}).items():
+            self.parameters.set_values(stage, stage_values)
+
+    def show_preview(self, sensor_id: str, frame: RGBDFrame, batch: DetectionBatch | None) -> None:
+        self.sensors.set_preview(sensor_id, frame, batch)
+        if self.calibration is not None and sensor_id in self.calibration.sensors:
+            points, colors = preview_cloud(
+                frame, self.calibration.pose(sensor_id), self.view_params.cloud_stride
+            )
+            self.world.set_cloud(sensor_id, points, colors)
+
+    def show_schemas(self, schemas: dict, values: dict) -> None:
+        self.parameters.set_schemas(schemas, values)
+
+    # ------------------------------------------------------- operator's intent
+    def _parameters_changed(self, stage: str, values: dict[str, Any]) -> None:
+        if stage == "view":
+            self._apply_view(values)
+        else:
+            self.source.set_params(stage, values)
+            if stage == "detection" and "max_distance" in values:
+                self._draw_calibration()
+
+    def _apply_view(self, values: dict[str, Any]) -> None:
+        self.view_params.update(values)
+        view = self.view_params
+        self.top_view.set_trail_seconds(view.trail_seconds)
+        self.world.trails.seconds = view.trail_seconds
+        self.world.track_radius = view.track_radius
+        self.sensors.stale_after = view.status_timeout
+        self.log_panel.max_lines = view.log_lines
+        if {"frustum_depth", "coverage_depth"} & set(values):
+            self._draw_calibration()
+
+    def closeEvent(self, event) -> None:  # noqa: N802 - Qt
+        for name in ("optrack", "app"):
+            logging.getLogger(name).removeHandler(self.log_handler)
+        self.source.close()
+        super().closeEvent(event)

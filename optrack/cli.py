@@ -139,10 +139,10 @@ def cmd_cloud(args: argparse.Namespace) -> int:
 # Each benchmark is a handler "module:function" taking the parsed arguments;
 # None until the part it measures is built.
 BENCHES: dict[str, str | None] = {
-    "sim": None,
-    "detection": None,
+    "sim": "optrack.sim.bench:cmd_bench_sim",
+    "detection": "optrack.detection.bench:bench_detection",
     "tracking": None,
-    "calibration": None,
+    "calibration": "optrack.calibration.bench:bench_calibration",
     "e2e": None,
 }
 
@@ -194,14 +194,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = command(
         "sim",
         "Simulate a venue with walking people and write a recording with ground truth.",
-        NotAvailable("the simulated venue"),
+        "optrack.sim.cli:cmd_sim",
     )
     p.add_argument("scenario", help="scenario name or YAML file (resources/scenarios)")
     p.add_argument("--out", required=True, help="output recording directory (must be new)")
     p.add_argument(
         "--seed", type=int, default=0, help="random seed (the same seed gives the same recording)"
     )
-    p.add_argument("--seconds", type=float, default=10.0, help="simulated duration, s")
+    p.add_argument("--seconds", type=float, help="simulated duration, s (default: the scenario's)")
     p.add_argument("--sensors", type=int, help="number of sensors (default: the scenario's)")
     p.add_argument("--people", type=int, help="number of people (default: the scenario's)")
     p.add_argument(
@@ -215,12 +215,24 @@ def build_parser() -> argparse.ArgumentParser:
     p = command(
         "detect",
         "Detect people in a point cloud, a recording or a live sensor.",
-        NotAvailable("the people detector"),
+        "optrack.detection.cli:cmd_detect",
     )
-    p.add_argument("input", help=".pcd file, recording directory or sensor URI")
+    p.add_argument("input", help=".pcd file, depth image, recording directory or sensor URI")
     p.add_argument("--intrinsics", help="fx,fy,cx,cy in pixels (needed for a bare .pcd)")
     p.add_argument("--ground", help="ground plane a,b,c,d in the camera frame (default: automatic)")
     p.add_argument("--config", help="YAML parameter file")
+    p.add_argument(
+        "--sensor-model",
+        choices=("kinect1", "kinect2", "sr4500", "stereo", "pcl", "default"),
+        help="parameter defaults of this sensor model (default: the recording's; PCL's for a .pcd)",
+    )
+    p.add_argument("--preset", choices=("children",), help="parameter preset on top of the model")
+    p.add_argument("--sensor", help="recording: only this sensor (default: all)")
+    p.add_argument("--frames", type=int, help="recording or sensor: stop after this many frames")
+    p.add_argument("--color", help="depth image: registered colour image of the same size")
+    p.add_argument(
+        "--depth-scale", type=float, help="depth image: metres per unit (default 0.001: millimetres)"
+    )
     _add_json(p)
 
     # eval
@@ -245,17 +257,21 @@ def build_parser() -> argparse.ArgumentParser:
     q = command(
         "intrinsics",
         "Intrinsics of one camera from chessboard images.",
-        NotAvailable("camera calibration"),
+        "optrack.calibration.commands:cmd_intrinsics",
         calibrate,
     )
     q.add_argument("images", nargs="+", help="chessboard images")
     q.add_argument("--board", required=True, help="inner corners, columns x rows, e.g. 9x6")
     q.add_argument("--square", type=float, required=True, help="square size, m")
+    q.add_argument(
+        "--infrared", action="store_true", help="infrared images (equalised, upsampled if small)"
+    )
+    q.add_argument("--out", help="also write the intrinsics to this YAML file")
     _add_json(q)
     q = command(
         "stereo",
         "Relative pose of a stereo pair from chessboard image pairs.",
-        NotAvailable("camera calibration"),
+        "optrack.calibration.commands:cmd_stereo",
         calibrate,
     )
     q.add_argument("--board", required=True, help="inner corners, columns x rows, e.g. 9x6")
@@ -266,21 +282,74 @@ def build_parser() -> argparse.ArgumentParser:
     q = command(
         "network",
         "Calibrate every sensor of a recording (checkerboard, ground).",
-        NotAvailable("network calibration"),
+        "optrack.calibration.commands:cmd_network",
         calibrate,
     )
     q.add_argument("recording", help="recording of the checkerboard session")
     q.add_argument("--out", required=True, help="calibration file to write")
+    q.add_argument("--board", help="inner corners CxR (default: the recording's board)")
+    q.add_argument("--square", type=float, help="square size, m (default: the recording's)")
+    q.add_argument(
+        "--board-thickness", type=float, help="board face above the floor when laid on it, m"
+    )
+    q.add_argument(
+        "--floor",
+        default="auto",
+        help="which views lie on the floor: auto (depth test), none, after:SECONDS",
+    )
     _add_json(q)
     q = command(
         "refine",
         "Refine a calibration from one person walking.",
-        NotAvailable("calibration refinement"),
+        "optrack.calibration.commands:cmd_refine",
         calibrate,
     )
     q.add_argument("recording", help="recording of one person walking")
     q.add_argument("--calibration", required=True, help="calibration file to refine")
     q.add_argument("--out", required=True, help="refined calibration file to write")
+    q.add_argument(
+        "--rate", type=float, default=10.0, help="frames per second run through the detector"
+    )
+    _add_json(q)
+    q = command(
+        "ground",
+        "Set the world frame: boards lying on the floor, or points of known coordinates.",
+        "optrack.calibration.commands:cmd_ground",
+        calibrate,
+    )
+    q.add_argument("recording", nargs="?", help="recording with the board on the floor")
+    q.add_argument("--calibration", required=True, help="calibration file to update")
+    q.add_argument("--out", required=True, help="calibration file to write")
+    q.add_argument("--points", help="YAML file of points with known world coordinates")
+    q.add_argument("--board", help="inner corners CxR (default: the calibration's board)")
+    q.add_argument("--square", type=float, help="square size, m")
+    q.add_argument(
+        "--board-thickness", type=float, help="board face above the floor when laid on it, m"
+    )
+    q.add_argument("--floor", default="auto", help="views on the floor: auto, all, after:SECONDS")
+    _add_json(q)
+    q = command(
+        "board",
+        "Write a printable checkerboard (PDF or PNG) with its size printed on it.",
+        "optrack.calibration.commands:cmd_board",
+        calibrate,
+    )
+    q.add_argument("--board", default="9x6", help="inner corners, columns x rows (default 9x6)")
+    q.add_argument("--square", type=float, default=0.1, help="square size, m (default 0.1)")
+    q.add_argument("--out", required=True, help="output .pdf or .png")
+    q.add_argument("--paper", default="fit", help="fit, a4, a3, a2, a1, a0 or letter")
+    q.add_argument("--dpi", type=int, default=300, help="PNG resolution (default 300)")
+    _add_json(q)
+    q = command(
+        "export",
+        "Export a calibration as OpenPTrack's camera_poses.yaml or ROS static transforms.",
+        "optrack.calibration.commands:cmd_export",
+        calibrate,
+    )
+    q.add_argument("calibration", help="calibration file")
+    q.add_argument("--format", required=True, choices=("openptrack", "ros"), help="what to write")
+    q.add_argument("--out", required=True, help="file to write")
+    q.add_argument("--parent", default="world", help="ROS parent frame (default world)")
     _add_json(q)
 
     # bench
@@ -323,12 +392,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = command(
         "sensors",
         "List the depth cameras attached to this computer.",
-        NotAvailable("camera discovery"),
+        "optrack.sensors.cli:cmd_sensors",
+    )
+    p.add_argument(
+        "--udev-rules",
+        action="store_true",
+        help="print the udev rules that let users open the cameras (Linux) and exit",
     )
     _add_json(p)
-    p = command(
-        "record", "Record live sensors into a recording.", NotAvailable("live camera capture")
-    )
+    p = command("record", "Record live sensors into a recording.", "optrack.sensors.cli:cmd_record")
     p.add_argument(
         "--sensor",
         action="append",

@@ -21,7 +21,9 @@ __all__ = [
     "Plane",
     "backproject",
     "backproject_points",
+    "camera_frustum",
     "compose",
+    "floor_footprint",
     "invert",
     "make_pose",
     "pose_from_quaternion",
@@ -340,3 +342,74 @@ def project(points: np.ndarray, intrinsics: Intrinsics) -> tuple[np.ndarray, np.
         u = intrinsics.fx * points[:, 0] / points[:, 2] + intrinsics.cx
         v = intrinsics.fy * points[:, 1] / points[:, 2] + intrinsics.cy
     return np.stack([u, v], axis=1), in_front
+
+
+# ------------------------------------------------------- field of view, coverage
+
+
+def _image_corner_rays(intrinsics: Intrinsics) -> np.ndarray:
+    """Rays (x/z, y/z, 1) through the outer corners of the image, 4x3, clockwise in the
+    image from the top-left. Corners are at -0.5 and size - 0.5 (pixel centres at integers)."""
+    if not (intrinsics.width and intrinsics.height):
+        raise ValueError("the field of view needs the intrinsics' image size (width, height).")
+    right, bottom = intrinsics.width - 0.5, intrinsics.height - 0.5
+    pixels = np.array([[-0.5, -0.5], [right, -0.5], [right, bottom], [-0.5, bottom]])
+    if intrinsics.has_distortion:
+        normalised = cv2.undistortPoints(
+            pixels.reshape(-1, 1, 2), intrinsics.K, intrinsics.dist_coeffs
+        ).reshape(-1, 2)
+    else:
+        normalised = (pixels - (intrinsics.cx, intrinsics.cy)) / (intrinsics.fx, intrinsics.fy)
+    return np.column_stack([normalised, np.ones(4)])
+
+
+def camera_frustum(intrinsics: Intrinsics, world_T_camera: np.ndarray, depth: float) -> np.ndarray:
+    """The camera's viewing pyramid up to ``depth`` metres along its optical axis: 5x3
+    world points, the optical centre then the four image corners at that depth
+    (top-left, top-right, bottom-right, bottom-left as seen in the image)."""
+    if not depth > 0:
+        raise ValueError(f"frustum depth must be > 0 m; got {depth}.")
+    corners = _image_corner_rays(intrinsics) * depth
+    points = np.vstack([np.zeros(3), corners])
+    return transform_points(world_T_camera, points).astype(np.float64)
+
+
+def floor_footprint(
+    intrinsics: Intrinsics,
+    world_T_camera: np.ndarray,
+    max_depth: float,
+    floor: Plane | None = None,
+) -> np.ndarray:
+    """Where the camera sees the floor: the section of its viewing pyramid (depth in
+    (0, ``max_depth``] metres along the optical axis, as the detector's ``max_distance``)
+    by the floor plane (world z = 0 unless given, world frame).
+
+    The pyramid is convex, so the section is a convex polygon: the points where the
+    pyramid's eight edges cross the plane, ordered counter-clockwise seen from the
+    normal's side. Returns Kx3 world points (K >= 3), or 0x3 when the camera does not
+    see the floor within ``max_depth``.
+    """
+    floor = Plane(0.0, 0.0, 1.0, 0.0) if floor is None else floor
+    vertices = camera_frustum(intrinsics, world_T_camera, max_depth)
+    edges = [(0, 1), (0, 2), (0, 3), (0, 4), (1, 2), (2, 3), (3, 4), (4, 1)]
+    signed = floor.distance(vertices)
+    crossings = []
+    for i, j in edges:
+        di, dj = signed[i], signed[j]
+        if di == 0.0:
+            crossings.append(vertices[i])
+        if (di < 0.0 < dj) or (dj < 0.0 < di):
+            crossings.append(vertices[i] + di / (di - dj) * (vertices[j] - vertices[i]))
+    if len(crossings) < 3:
+        return np.zeros((0, 3))
+    points = floor.project(np.unique(np.round(np.array(crossings), 12), axis=0))
+    if len(points) < 3:
+        return np.zeros((0, 3))
+    # Order around the centroid in a 2D basis of the plane.
+    normal = floor.normal
+    u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    offsets = points - points.mean(axis=0)
+    order = np.argsort(np.arctan2(offsets @ v, offsets @ u))
+    return points[order]

@@ -1,15 +1,36 @@
-"""The World 3D view: the venue's floor and the world frame, in OpenGL."""
+"""The World 3D view: floor, cameras, their point clouds and the tracked people, in OpenGL."""
 
 from __future__ import annotations
 
+import numpy as np
 import pyqtgraph.opengl as gl
+from PySide6.QtGui import QColor, QFont, QMatrix4x4
 from PySide6.QtWidgets import QSizePolicy
+
+from app.trails import TrailHistory, track_color
+from app.widgets.overlay import Overlay
+from optrack.geometry import camera_frustum
+from optrack.types import NetworkCalibration, TrackBatch
+
+FRUSTUM_COLOR = (0.45, 0.75, 1.0, 1.0)
+# Frustum vertices: 0 is the optical centre, 1-4 the image corners at depth.
+FRUSTUM_EDGES = np.array([0, 1, 0, 2, 0, 3, 0, 4, 1, 2, 2, 3, 3, 4, 4, 1])
+
+
+def _rgba(rgb: tuple[int, int, int], alpha: float = 1.0) -> tuple[float, float, float, float]:
+    return (rgb[0] / 255, rgb[1] / 255, rgb[2] / 255, alpha)
 
 
 class WorldView(gl.GLViewWidget):
     """3D view of the world frame (origin on the floor, z up, metres)."""
 
-    def __init__(self, floor_size_m: float = 10.0, parent=None) -> None:
+    def __init__(
+        self,
+        floor_size_m: float = 10.0,
+        trail_seconds: float = 8.0,
+        track_radius: float = 0.25,
+        parent=None,
+    ) -> None:
         super().__init__(parent)
         # Without Expanding a GLViewWidget collapses to zero width in a box layout.
         self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
@@ -24,3 +45,100 @@ class WorldView(gl.GLViewWidget):
         self.axes = gl.GLAxisItem()
         self.axes.setSize(1.0, 1.0, 1.0)
         self.addItem(self.axes)
+        self.overlay = Overlay(self)
+        self.track_radius = track_radius
+        self.trails = TrailHistory(trail_seconds)
+        self._font = QFont()
+        self._font.setPointSize(11)
+        self._cylinder = gl.MeshData.cylinder(rows=1, cols=24, radius=[1.0, 1.0], length=1.0)
+        self.cameras: dict[str, tuple[gl.GLLinePlotItem, gl.GLTextItem]] = {}
+        self.clouds: dict[str, gl.GLScatterPlotItem] = {}
+        self.people: dict[int, tuple[gl.GLMeshItem, gl.GLTextItem]] = {}
+        self.trail_items: dict[int, gl.GLLinePlotItem] = {}
+
+    # ---------------------------------------------------------------- cameras
+    def set_calibration(self, calibration: NetworkCalibration, frustum_depth: float) -> None:
+        """Draw each calibrated camera's viewing pyramid (``frustum_depth`` metres long)
+        and its name; a camera without intrinsics is drawn as a point with its name."""
+        for lines, label in self.cameras.values():
+            self.removeItem(lines)
+            self.removeItem(label)
+        self.cameras.clear()
+        for sensor_id, sensor in sorted(calibration.sensors.items()):
+            pose = sensor.pose
+            if sensor.intrinsics is not None and sensor.intrinsics.width:
+                vertices = camera_frustum(sensor.intrinsics, pose, frustum_depth)
+                lines = gl.GLLinePlotItem(
+                    pos=vertices[FRUSTUM_EDGES], color=FRUSTUM_COLOR, width=2, mode="lines"
+                )
+            else:
+                lines = gl.GLScatterPlotItem(pos=pose[None, :3, 3], color=FRUSTUM_COLOR, size=8)
+            label = gl.GLTextItem(
+                pos=pose[:3, 3] + (0.0, 0.0, 0.15), text=sensor_id, color=QColor(150, 200, 255)
+            )
+            label.setData(font=self._font)
+            self.addItem(lines)
+            self.addItem(label)
+            self.cameras[sensor_id] = (lines, label)
+
+    def set_cloud(self, sensor_id: str, points: np.ndarray, colors: np.ndarray | None) -> None:
+        """Show a sensor's (already decimated) cloud: Nx3 world points, Nx3 RGB uint8 or None."""
+        if colors is None:
+            # Colour by height above the floor, so the floor and people stand apart.
+            z = np.clip(points[:, 2] / 2.0, 0.0, 1.0)
+            rgba = np.column_stack(
+                [0.3 + 0.6 * z, 0.8 - 0.3 * z, 1.0 - 0.7 * z, np.full(len(z), 0.8)]
+            )
+        else:
+            rgba = np.column_stack([colors[:, :3] / 255.0, np.full(len(colors), 0.9)])
+        item = self.clouds.get(sensor_id)
+        if item is None:
+            item = gl.GLScatterPlotItem(size=2.0, pxMode=True)
+            self.addItem(item)
+            self.clouds[sensor_id] = item
+        item.setData(pos=np.asarray(points, dtype=np.float32), color=rgba.astype(np.float32))
+
+    # ----------------------------------------------------------------- people
+    def set_batch(self, batch: TrackBatch) -> None:
+        """Each track as a cylinder of its height, its id above it, its trail on the floor."""
+        self.trails.update(batch)
+        current = {t.id: t for t in batch.tracks}
+        for track_id in list(self.people):
+            if track_id not in current:
+                mesh, label = self.people.pop(track_id)
+                self.removeItem(mesh)
+                self.removeItem(label)
+        for track_id, track in current.items():
+            if track_id not in self.people:
+                mesh = gl.GLMeshItem(
+                    meshdata=self._cylinder,
+                    smooth=True,
+                    shader="shaded",
+                    color=_rgba(track_color(track_id)),
+                )
+                label = gl.GLTextItem(text=str(track_id), color=QColor(255, 255, 255))
+                label.setData(font=self._font)
+                self.addItem(mesh)
+                self.addItem(label)
+                self.people[track_id] = (mesh, label)
+            mesh, label = self.people[track_id]
+            transform = QMatrix4x4()
+            transform.translate(track.x, track.y, 0.0)
+            transform.scale(self.track_radius, self.track_radius, max(track.height, 0.01))
+            mesh.setTransform(transform)
+            label.setData(pos=(track.x, track.y, track.height + 0.2))
+        trail_ids = set(self.trails.ids())
+        for track_id in list(self.trail_items):
+            if track_id not in trail_ids:
+                self.removeItem(self.trail_items.pop(track_id))
+        for track_id in trail_ids:
+            trail = self.trails.trail(track_id)
+            if len(trail) < 2:
+                continue
+            pos = np.column_stack([trail, np.full(len(trail), 0.02)])
+            item = self.trail_items.get(track_id)
+            if item is None:
+                item = gl.GLLinePlotItem(color=_rgba(track_color(track_id)), width=2)
+                self.addItem(item)
+                self.trail_items[track_id] = item
+            item.setData(pos=pos)

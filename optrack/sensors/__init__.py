@@ -6,5 +6,6 @@ Sources are named by URIs (see docs/architecture.md): ``sim://<scenario>/<n>``,
 """
 
 from optrack.sensors.base import Sensor, SensorError
+from optrack.sensors.uri import SensorURI, open_sensor, parse_uri
 
-__all__ = ["Sensor", "SensorError"]
+__all__ = ["Sensor", "SensorError", "SensorURI", "open_sensor", "parse_uri"]

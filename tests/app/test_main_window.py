@@ -8,7 +8,21 @@ import numpy as np
 import pytest
 from PySide6.QtGui import QImage
 
+from optrack.geometry import make_pose
+from optrack.types import (
+    Detection,
+    DetectionBatch,
+    Intrinsics,
+    NetworkCalibration,
+    RGBDFrame,
+    SensorCalibration,
+    Track,
+    TrackBatch,
+)
+
 pytestmark = pytest.mark.opengl
+
+KINECT = Intrinsics(525.0, 525.0, 319.5, 239.5, width=640, height=480)
 
 
 def image_array(image: QImage) -> np.ndarray:
@@ -19,13 +33,18 @@ def image_array(image: QImage) -> np.ndarray:
     return raw.reshape(height, stride)[:, : width * 3].reshape(height, width, 3)
 
 
-def test_main_window_shows_the_floor_grid_in_opengl(qtbot):
+@pytest.fixture
+def window(qtbot):
     from app.main_window import MainWindow
 
     window = MainWindow()
     qtbot.addWidget(window)
     window.show()
     qtbot.waitExposed(window)
+    return window
+
+
+def test_main_window_shows_the_floor_grid_in_opengl(window):
     assert window.world.width() > 300 and window.world.height() > 200
     frame = image_array(window.world.grabFramebuffer())
     background = np.array([25, 28, 34])
@@ -33,6 +52,69 @@ def test_main_window_shows_the_floor_grid_in_opengl(qtbot):
     assert grid.mean() > 0.005  # grid lines were drawn
     assert grid.mean() < 0.5  # and the background is still the background
     assert window.site_label.text() == "No site connected"
+
+
+def test_without_a_site_every_view_says_so_and_nothing_is_invented(window):
+    assert window.top_view.overlay.text() == "No site connected"
+    assert window.world.overlay.text() == "No site connected"
+    assert window.tracks_table.caption.text() == "No site connected"
+    assert window.tracks_table.model.rowCount() == 0
+    assert window.top_view.track_positions() == {}
+    assert not window.outputs.add_button.isEnabled()
+    assert {"detection", "tracking", "view"} <= set(window.parameters.schemas)
+    window.parameters.editors["detection"]["voxel_size"].slider.setValue(3)
+    assert window.log_panel.lines()[-1].endswith(
+        "No site connected: detection.voxel_size was not sent to any node."
+    )
+
+
+def test_window_shows_what_its_source_reports(qtbot, window):
+    source = window.source
+    looking_down = make_pose(np.diag([1.0, -1.0, -1.0]), [0.0, 0.0, 3.0])
+    calibration = NetworkCalibration(
+        sensors={
+            "ceiling": SensorCalibration(
+                world_T_camera=tuple(map(tuple, looking_down)), intrinsics=KINECT
+            )
+        }
+    )
+    source.calibration.emit(calibration)
+    assert set(window.world.cameras) == {"ceiling"}
+    assert window.top_view.footprints["ceiling"].shape == (4, 2)
+    assert window.sensors.table.rowCount() == 1
+    source.tracks.emit(
+        TrackBatch(stamp=1.0, seq=30, tracks=[Track(1, 0.5, 0.25, 1.75, age=1.0, confidence=0.8)])
+    )
+    assert window.tracks_table.model.rowCount() == 1
+    assert window.top_view.track_positions() == {1: (0.5, 0.25)}
+    assert set(window.world.people) == {1}
+    depth = np.full((48, 64), 3.0, dtype=np.float32)
+    preview = RGBDFrame(depth, KINECT.scaled(0.1), sensor_id="ceiling")
+    batch = DetectionBatch(
+        "ceiling", 1.0, detections=[Detection(0.5, 0.25, 0.9, 1.75, 1.2, box=(30, 20, 6, 10))]
+    )
+    source.preview.emit("ceiling", preview, batch)
+    assert window.sensors.preview.boxes and window.sensors.preview.image is not None
+    cloud = window.world.clouds["ceiling"].pos
+    np.testing.assert_allclose(cloud[:, 2], 0.0, atol=1e-5)  # a floor 3 m below the camera
+    source.status.emit(
+        "detector/ceiling",
+        {"sensor": "ceiling", "fps": 30.0, "params": {"detection": {"voxel_size": 0.08}}},
+    )
+    assert window.sensors.status_text("ceiling")["fps"] == "30.0"
+    assert window.parameters.editors["detection"]["voxel_size"].value() == 0.08
+    source.log.emit("error", "sensor 'ceiling' stopped sending frames; check its cable.")
+    assert window.log_panel.lines()[-1].endswith(
+        "Error: sensor 'ceiling' stopped sending frames; check its cable."
+    )
+
+
+def test_view_parameters_change_the_window_not_the_nodes(qtbot, window):
+    with qtbot.assertNotEmitted(window.source.log):
+        window.parameters.edit("view", "trail_seconds", 2.0)
+        window.parameters.edit("view", "track_radius", 0.4)
+    assert window.top_view.trails.seconds == 2.0 and window.world.trails.seconds == 2.0
+    assert window.world.track_radius == 0.4
 
 
 def test_optrack_gui_takes_a_screenshot_and_quits(tmp_path):

@@ -1,0 +1,95 @@
+"""Where the window's data comes from: one small Qt interface.
+
+A :class:`SiteSource` is what the window listens to and what it sends the
+operator's intent to. The window does not know whether a site runs in this
+process, on the bus, or not at all. Signals may be emitted from any thread
+(a bus callback, a worker); Qt queues them to the window's thread.
+
+The base class is the honest "no site": it never emits data, and it
+answers every request with a sentence on :attr:`SiteSource.log` saying that
+nothing was sent. A bus client subclasses it, emits the signals as messages
+arrive, and overrides the request methods.
+
+Status dictionaries (``status(node, values)``) are shown as they come; the
+keys the Sensors dock puts in columns are listed in :data:`SENSOR_STATUS_KEYS`
+and the Outputs dock reads the ``outputs`` node's ``destinations`` (see
+docs/gui.md).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from PySide6.QtCore import QObject, Signal
+
+__all__ = ["NO_SITE", "OUTPUT_KINDS", "SENSOR_STATUS_KEYS", "SiteSource"]
+
+NO_SITE = "No site connected"
+
+# Status keys of a sensor's node shown as columns: (key, column title, format).
+SENSOR_STATUS_KEYS: tuple[tuple[str, str, str], ...] = (
+    ("fps", "fps", "{:.1f}"),
+    ("latency_ms", "latency\n(ms)", "{:.0f}"),
+    ("clock_offset_ms", "offset\n(ms)", "{:+.1f}"),
+    ("dropped", "dropped", "{:d}"),
+    ("last_error", "last error", "{}"),
+)
+
+OUTPUT_KINDS = ("udp", "osc", "websocket")
+
+
+class SiteSource(QObject):
+    """The window's one data source; the base class is "no site connected".
+
+    Signals (what the site tells the window):
+
+    * ``tracks(TrackBatch)``: the tracker's output.
+    * ``detections(DetectionBatch)``: one sensor's detections (world frame).
+    * ``calibration(NetworkCalibration)``: the calibration the nodes use.
+    * ``status(str node, dict values)``: a node's status (see module docstring).
+    * ``preview(str sensor, RGBDFrame frame, object batch)``: a down-sampled
+      frame and the detections found in it (a ``DetectionBatch`` or None);
+      detection boxes are in the preview's depth-image pixels.
+    * ``schemas(dict stage -> Schema, dict stage -> dict values)``: the
+      parameters the nodes take and their current values.
+    * ``log(str level, str text)``: a sentence for the operator; level is
+      ``info``, ``warning`` or ``error``.
+    * ``connection(str description)``: the site now connected ("" when none).
+    """
+
+    tracks = Signal(object)
+    detections = Signal(object)
+    calibration = Signal(object)
+    status = Signal(str, dict)
+    preview = Signal(str, object, object)
+    schemas = Signal(dict, dict)
+    log = Signal(str, str)
+    connection = Signal(str)
+
+    def describe(self) -> str:
+        """One line for the status bar: which site this is."""
+        return NO_SITE
+
+    @property
+    def connected(self) -> bool:
+        return False
+
+    # ----------------------------------------------------- operator's intent
+    def set_params(self, stage: str, values: dict[str, Any]) -> None:
+        """Apply validated parameter values to the nodes running ``stage``."""
+        names = ", ".join(f"{stage}.{name}" for name in values)
+        self.log.emit("warning", f"{NO_SITE}: {names} was not sent to any node.")
+
+    def add_output(self, kind: str, address: str) -> None:
+        """Start streaming tracks to a destination (``kind`` in :data:`OUTPUT_KINDS`)."""
+        self.log.emit("warning", f"{NO_SITE}: the {kind} output {address} was not started.")
+
+    def remove_output(self, kind: str, address: str) -> None:
+        self.log.emit("warning", f"{NO_SITE}: the {kind} output {address} was not stopped.")
+
+    def enable_output(self, kind: str, address: str, enabled: bool) -> None:
+        verb = "enabled" if enabled else "disabled"
+        self.log.emit("warning", f"{NO_SITE}: the {kind} output {address} was not {verb}.")
+
+    def close(self) -> None:
+        """Disconnect and release what the source holds; idempotent."""

@@ -1,0 +1,164 @@
+"""The Outputs dock: where the tracks are streamed (UDP JSON, OSC, WebSocket).
+
+The table shows what the site reports (the ``outputs`` node's status); the
+buttons only send the operator's request to the site.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import (
+    QComboBox,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QLineEdit,
+    QPushButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
+
+from app.source import NO_SITE, OUTPUT_KINDS
+
+KIND_TITLES = {"udp": "UDP JSON", "osc": "OSC", "websocket": "WebSocket"}
+DEFAULT_ADDRESSES = {"udp": "127.0.0.1:21234", "osc": "127.0.0.1:9000", "websocket": "0.0.0.0:8765"}
+COLUMNS = ("on", "kind", "address", "packets/s")
+
+
+def check_address(address: str) -> str | None:
+    """Why ``host:port`` cannot be a destination, or None when it can."""
+    host, sep, port = address.strip().rpartition(":")
+    if not sep or not host:
+        return f"'{address}' is not host:port; write it like 127.0.0.1:21234."
+    if not port.isdigit() or not 1 <= int(port) <= 65535:
+        return f"the port in '{address}' must be a number from 1 to 65535."
+    return None
+
+
+class OutputsPanel(QWidget):
+    """Destinations and their rates; add, remove, enable."""
+
+    add_requested = Signal(str, str)  # kind, address
+    remove_requested = Signal(str, str)
+    enable_requested = Signal(str, str, bool)
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.table = QTableWidget(0, len(COLUMNS))
+        self.table.setHorizontalHeaderLabels(COLUMNS)
+        self.table.verticalHeader().hide()
+        self.table.setSelectionBehavior(QTableWidget.SelectionBehavior.SelectRows)
+        self.table.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
+        header = self.table.horizontalHeader()
+        header.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        header.setSectionResizeMode(2, QHeaderView.ResizeMode.Stretch)
+        self.kind = QComboBox()
+        for kind in OUTPUT_KINDS:
+            self.kind.addItem(KIND_TITLES[kind], kind)
+        self.address = QLineEdit(DEFAULT_ADDRESSES[OUTPUT_KINDS[0]])
+        self.address.setToolTip(
+            "host:port. UDP and OSC send to that address; a WebSocket output listens on it."
+        )
+        self.add_button = QPushButton("Add")
+        self.remove_button = QPushButton("Remove")
+        self.message = QLabel(NO_SITE)
+        self.message.setWordWrap(True)
+        row = QHBoxLayout()
+        row.addWidget(self.kind)
+        row.addWidget(self.address, 1)
+        row.addWidget(self.add_button)
+        row.addWidget(self.remove_button)
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(4, 4, 4, 4)
+        layout.addWidget(self.table, 1)
+        layout.addLayout(row)
+        layout.addWidget(self.message)
+        self.destinations: list[dict[str, Any]] = []
+        self.kind.currentIndexChanged.connect(self._kind_changed)
+        self.add_button.clicked.connect(self.request_add)
+        self.address.returnPressed.connect(self.request_add)
+        self.remove_button.clicked.connect(self.request_remove)
+        self.table.itemChanged.connect(self._item_changed)
+        self.set_connected(False)
+
+    def set_connected(self, connected: bool, description: str = NO_SITE) -> None:
+        for widget in (self.kind, self.address, self.add_button, self.remove_button):
+            widget.setEnabled(connected)
+        self.message.setText("" if connected else f"{description}: outputs run on a site.")
+
+    def _kind_changed(self) -> None:
+        kind = self.kind.currentData()
+        if self.address.text() in DEFAULT_ADDRESSES.values():
+            self.address.setText(DEFAULT_ADDRESSES[kind])
+
+    def request_add(self) -> None:
+        kind, address = self.kind.currentData(), self.address.text().strip()
+        problem = check_address(address)
+        if problem is not None:
+            self.message.setText(problem)
+            return
+        if any(d["kind"] == kind and d["address"] == address for d in self.destinations):
+            self.message.setText(f"{KIND_TITLES[kind]} to {address} is already in the list.")
+            return
+        self.message.setText("")
+        self.add_requested.emit(kind, address)
+
+    def request_remove(self) -> None:
+        rows = sorted({index.row() for index in self.table.selectedIndexes()})
+        if not rows:
+            self.message.setText("Select the output to remove in the table first.")
+            return
+        for row in rows:
+            destination = self.destinations[row]
+            self.remove_requested.emit(destination["kind"], destination["address"])
+
+    def _item_changed(self, item: QTableWidgetItem) -> None:
+        if item.column() != 0 or self._filling:
+            return
+        destination = self.destinations[item.row()]
+        enabled = item.checkState() == Qt.CheckState.Checked
+        if enabled != bool(destination.get("enabled", True)):
+            self.enable_requested.emit(destination["kind"], destination["address"], enabled)
+
+    _filling = False
+
+    def set_destinations(self, destinations: list[dict[str, Any]]) -> None:
+        """The site's outputs: dicts with kind, address, enabled, packets_per_s (and error)."""
+        self._filling = True
+        try:
+            self.destinations = list(destinations)
+            self.table.setRowCount(len(self.destinations))
+            for row, destination in enumerate(self.destinations):
+                on = QTableWidgetItem()
+                on.setFlags(
+                    Qt.ItemFlag.ItemIsUserCheckable
+                    | Qt.ItemFlag.ItemIsEnabled
+                    | Qt.ItemFlag.ItemIsSelectable
+                )
+                on.setCheckState(
+                    Qt.CheckState.Checked
+                    if destination.get("enabled", True)
+                    else Qt.CheckState.Unchecked
+                )
+                rate = destination.get("packets_per_s")
+                cells = [
+                    on,
+                    QTableWidgetItem(KIND_TITLES.get(destination["kind"], destination["kind"])),
+                    QTableWidgetItem(destination["address"]),
+                    QTableWidgetItem("" if rate is None else f"{rate:.1f}"),
+                ]
+                if destination.get("error"):
+                    for cell in cells:
+                        cell.setToolTip(destination["error"])
+                for column, cell in enumerate(cells):
+                    self.table.setItem(row, column, cell)
+        finally:
+            self._filling = False
+
+    def set_status(self, node: str, values: dict) -> None:
+        if "destinations" in values:
+            self.set_destinations(values["destinations"])

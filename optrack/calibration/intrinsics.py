@@ -1,0 +1,245 @@
+"""Intrinsics of one camera from checkerboard views (OpenCV's calibrateCamera).
+
+Each view's reprojection RMS is measured; views much worse than the others
+(a blurred image, a corner snapped to the wrong place) are rejected and the
+camera is calibrated again without them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from optrack.calibration.board import (
+    CORNER_PARAMS,
+    Checkerboard,
+    CoverageMap,
+    find_corners,
+)
+from optrack.errors import UserError
+from optrack.params import Param, Params, Schema, register
+from optrack.types import Intrinsics
+
+__all__ = [
+    "INTRINSICS_PARAMS",
+    "IntrinsicsResult",
+    "calibrate_intrinsics",
+    "corners_from_images",
+]
+
+INTRINSICS_PARAMS = register(
+    Schema(
+        "calibration_intrinsics",
+        [
+            Param(
+                "distortion_model",
+                "k1k2p1p2k3",
+                choices=("k1k2p1p2", "k1k2p1p2k3", "rational"),
+                help="OpenCV distortion coefficients to estimate: 4, 5 (default) or the "
+                "8-coefficient rational model for wide lenses.",
+            ),
+            Param("fix_aspect_ratio", False, help="Estimate one focal length (fx = fy)."),
+            Param(
+                "zero_tangential",
+                False,
+                help="Assume no tangential distortion (p1 = p2 = 0).",
+            ),
+            Param(
+                "min_views",
+                4,
+                min=3,
+                max=1000,
+                step=1,
+                help="Fewest board views to calibrate from (also the fewest kept after "
+                "rejecting bad views).",
+            ),
+            Param(
+                "reject_factor",
+                3.0,
+                min=1.0,
+                max=100.0,
+                step=0.5,
+                help="A view is rejected when its RMS is this many times the median view's.",
+            ),
+            Param(
+                "reject_min_px",
+                0.5,
+                min=0.0,
+                max=50.0,
+                step=0.1,
+                unit="px",
+                help="...and above this many pixels (good views are never rejected).",
+            ),
+            Param(
+                "max_rejection_rounds",
+                3,
+                min=0,
+                max=20,
+                step=1,
+                help="Rounds of rejecting bad views and calibrating again.",
+            ),
+        ],
+        help="Intrinsic calibration of one camera from checkerboard views.",
+    )
+)
+
+
+class IntrinsicsError(UserError):
+    """Intrinsics that cannot be computed from the given views."""
+
+
+@dataclasses.dataclass
+class IntrinsicsResult:
+    """Intrinsics, reprojection RMS (px) over the kept views, and what was kept."""
+
+    intrinsics: Intrinsics
+    rms: float
+    per_view_rms: list[float]  # one per kept view, px
+    used: list[int]  # indices of kept views in the input
+    rejected: list[int]  # indices of rejected views
+    coverage: CoverageMap
+
+    def as_dict(self, labels: Sequence[str] | None = None) -> dict[str, object]:
+        k = self.intrinsics
+
+        def name(i: int) -> object:
+            return labels[i] if labels is not None else i
+
+        return {
+            "fx": k.fx,
+            "fy": k.fy,
+            "cx": k.cx,
+            "cy": k.cy,
+            "dist": list(k.dist),
+            "width": k.width,
+            "height": k.height,
+            "rms": self.rms,
+            "views": len(self.used),
+            "rejected": [name(i) for i in self.rejected],
+            "per_view_rms": {
+                str(name(i)): e for i, e in zip(self.used, self.per_view_rms, strict=True)
+            },
+            "coverage": self.coverage.fraction,
+        }
+
+
+def _flags(p: Params) -> int:
+    flags = 0
+    if p.distortion_model == "k1k2p1p2":
+        flags |= cv2.CALIB_FIX_K3
+    elif p.distortion_model == "rational":
+        flags |= cv2.CALIB_RATIONAL_MODEL
+    if p.fix_aspect_ratio:
+        flags |= cv2.CALIB_FIX_ASPECT_RATIO
+    if p.zero_tangential:
+        flags |= cv2.CALIB_ZERO_TANGENT_DIST
+    return flags
+
+
+def _calibrate(
+    corners: Sequence[np.ndarray], board: Checkerboard, size: tuple[int, int], flags: int
+) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    objects = [board.object_points.astype(np.float32)] * len(corners)
+    images = [c.reshape(-1, 1, 2).astype(np.float32) for c in corners]
+    camera = np.eye(3)
+    rms, camera, dist, _, _, _, _, per_view = cv2.calibrateCameraExtended(
+        objects, images, size, camera, None, flags=flags
+    )
+    count = 8 if flags & cv2.CALIB_RATIONAL_MODEL else 5  # OpenCV pads to 14
+    return float(rms), camera, dist.ravel()[:count], per_view.ravel()
+
+
+def calibrate_intrinsics(
+    corners: Sequence[np.ndarray],
+    board: Checkerboard,
+    image_size: tuple[int, int],
+    params: Params | None = None,
+) -> IntrinsicsResult:
+    """Calibrate from the corners of several views of ``board``.
+
+    ``corners``: one Nx2 array per view (pixels, board order); ``image_size``
+    is (width, height). Views whose reprojection RMS is above both
+    ``reject_factor`` x the median and ``reject_min_px`` are dropped, worst
+    first, and the camera is calibrated again.
+    """
+    p = params if params is not None else INTRINSICS_PARAMS.create()
+    width, height = image_size
+    if len(corners) < p.min_views:
+        raise IntrinsicsError(
+            f"intrinsics need at least {p.min_views} views of the {board.cols}x{board.rows} "
+            f"board; only {len(corners)} were found. Show the board in more images."
+        )
+    flags = _flags(p)
+    used = list(range(len(corners)))
+    rejected: list[int] = []
+    rms, camera, dist, per_view = _calibrate([corners[i] for i in used], board, image_size, flags)
+    for _ in range(int(p.max_rejection_rounds)):
+        threshold = max(p.reject_factor * float(np.median(per_view)), p.reject_min_px)
+        bad = [i for i, e in zip(used, per_view, strict=True) if e > threshold]
+        if not bad or len(used) - len(bad) < p.min_views:
+            break
+        rejected += bad
+        used = [i for i in used if i not in bad]
+        rms, camera, dist, per_view = _calibrate(
+            [corners[i] for i in used], board, image_size, flags
+        )
+    coverage = CoverageMap(width, height, int(CORNER_PARAMS.defaults()["coverage_cells"]))
+    for i in used:
+        coverage.add(corners[i])
+    intrinsics = Intrinsics(
+        fx=float(camera[0, 0]),
+        fy=float(camera[1, 1]),
+        cx=float(camera[0, 2]),
+        cy=float(camera[1, 2]),
+        width=width,
+        height=height,
+        dist=tuple(float(v) for v in dist),
+    )
+    return IntrinsicsResult(
+        intrinsics=intrinsics,
+        rms=rms,
+        per_view_rms=[float(e) for e in per_view],
+        used=used,
+        rejected=sorted(rejected),
+        coverage=coverage,
+    )
+
+
+def corners_from_images(
+    paths: Sequence[str | os.PathLike[str]],
+    board: Checkerboard,
+    *,
+    infrared: bool = False,
+    params: Params | None = None,
+) -> tuple[list[np.ndarray | None], tuple[int, int]]:
+    """Corners found in each image file (None where the board is not found) and the
+    image size (width, height), which must be the same for all images."""
+    results: list[np.ndarray | None] = []
+    size: tuple[int, int] | None = None
+    first = ""
+    for path in paths:
+        path = Path(path)
+        if not path.is_file():
+            raise IntrinsicsError(f"image {path} does not exist; check the path.")
+        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise IntrinsicsError(f"image {path} is not an image OpenCV can read.")
+        if image.ndim == 3:
+            image = cv2.cvtColor(image[..., :3], cv2.COLOR_BGR2RGB)
+        this = (image.shape[1], image.shape[0])
+        if size is None:
+            size, first = this, str(path)
+        elif this != size:
+            raise IntrinsicsError(
+                f"image {path} is {this[0]}x{this[1]} but {first} is {size[0]}x{size[1]}; "
+                "give images of one camera at one resolution."
+            )
+        results.append(find_corners(image, board, params, infrared=infrared))
+    if size is None:
+        raise IntrinsicsError("no images were given; list the chessboard images to use.")
+    return results, size

@@ -1,0 +1,131 @@
+"""``optrack bench detection``: speed and accuracy of the people detector.
+
+Real frames (../shared/data/pcl, PCL's test data): ``five_people_ms`` is the
+median time of one detection on ``five_people.pcd`` at full resolution with
+PCL's unit-test settings and PCL's ground plane (the frame already in
+memory, as PCL's test times it), over repeated runs after a warm-up; the
+accuracy figures check the same frame against PCL's five people and its
+floor, and ``office1.pcd`` (no one in it). Simulated frames
+(``kinect2_fps`` and the recall and precision figures) need the simulator.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+import optrack
+from optrack.detection.ground import check_ground
+from optrack.detection.params import detection_params
+from optrack.detection.pipeline import PeopleDetector
+from optrack.types import Intrinsics
+
+__all__ = ["PCL_GROUND", "PCL_PEOPLE_XZ", "bench_detection", "match_people", "real_data_dir"]
+
+#: PCL's unit test: Kinect v1 intrinsics and the floor it sets (camera frame).
+PCL_INTRINSICS = Intrinsics(525.0, 525.0, 319.5, 239.5, 640, 480)
+PCL_GROUND = (-0.0103586, 0.997011, 0.0765573, -1.26614)
+#: The five people PCL's detector reports in five_people.pcd, camera-frame (x, z), metres.
+PCL_PEOPLE_XZ = ((0.128, 2.821), (0.475, 2.583), (-0.919, 2.103), (-0.592, 2.356), (0.763, 1.866))
+#: Timed runs and warm-up runs of the five_people frame.
+RUNS = 30
+WARM_UP = 3
+
+
+def real_data_dir() -> Path:
+    """../shared/data beside the project checkout."""
+    return Path(optrack.__file__).resolve().parent.parent.parent / "shared" / "data"
+
+
+def match_people(found_xz: np.ndarray, expected_xz: np.ndarray) -> tuple[int, float]:
+    """One-to-one matching (Hungarian) of found to expected floor positions:
+    (number matched, largest distance among the matches, metres)."""
+    found_xz = np.asarray(found_xz, dtype=np.float64).reshape(-1, 2)
+    expected_xz = np.asarray(expected_xz, dtype=np.float64).reshape(-1, 2)
+    if len(found_xz) == 0 or len(expected_xz) == 0:
+        return 0, float("nan")
+    cost = np.linalg.norm(found_xz[:, None, :] - expected_xz[None, :, :], axis=2)
+    rows, cols = linear_sum_assignment(cost)
+    return len(rows), float(cost[rows, cols].max())
+
+
+def _info(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def _real_frames(data: Path) -> dict[str, Any]:
+    from optrack.io.pcd import read_pcd
+
+    pcl = data / "pcl"
+    five = read_pcd(pcl / "five_people.pcd")
+    office = read_pcd(pcl / "office1.pcd")
+    out: dict[str, Any] = {}
+
+    # Speed: PCL's settings and floor, the frame in memory, as PCL's test.
+    detector = PeopleDetector(detection_params("pcl"), ground=PCL_GROUND)
+    times = []
+    for run in range(WARM_UP + RUNS):
+        detector.ground.plane = check_ground(PCL_GROUND)  # every run starts from PCL's floor
+        started = time.perf_counter()
+        batch = detector.process_cloud(five.points, PCL_INTRINSICS, five.colors)
+        elapsed = (time.perf_counter() - started) * 1000.0
+        if run >= WARM_UP:
+            times.append(elapsed)
+    out["five_people_ms"] = statistics.median(times)
+    out["five_people_ms_min"] = min(times)
+    found = np.array([(d.camera_xyz[0], d.camera_xyz[2]) for d in batch.detections])
+    matched, worst = match_people(found, np.array(PCL_PEOPLE_XZ))
+    out["five_people_count_pcl_ground"] = len(batch.detections)
+    out["five_people_max_error_m_pcl_ground"] = worst if matched == 5 else None
+
+    # Automatic floor: the same frame, a fresh detector.
+    detector = PeopleDetector(detection_params("pcl"))
+    started = time.perf_counter()
+    batch = detector.process_cloud(five.points, PCL_INTRINSICS, five.colors)
+    out["five_people_auto_ground_first_frame_ms"] = (time.perf_counter() - started) * 1000.0
+    found = np.array([(d.camera_xyz[0], d.camera_xyz[2]) for d in batch.detections])
+    matched, worst = match_people(found, np.array(PCL_PEOPLE_XZ))
+    out["five_people_count"] = len(batch.detections)
+    out["five_people_max_error_m"] = worst if matched == 5 else None
+    reference = check_ground(PCL_GROUND)
+    plane = detector.ground.plane
+    out["ground_angle_deg"] = reference.angle_deg(plane) if plane is not None else None
+    out["ground_offset_m"] = abs(reference.d - plane.d) if plane is not None else None
+
+    detector = PeopleDetector(detection_params("pcl"))
+    out["office1_count"] = len(
+        detector.process_cloud(office.points, PCL_INTRINSICS, office.colors).detections
+    )
+    return out
+
+
+def bench_detection(args: argparse.Namespace) -> int:
+    """The ``optrack bench detection`` command."""
+    result: dict[str, Any] = {
+        "five_people_ms": None,
+        "five_people_target_ms": 44.0,
+        "kinect2_fps": None,
+        "kinect2_target_fps": 120.0,
+    }
+    data = real_data_dir()
+    if (data / "pcl" / "five_people.pcd").is_file():
+        _info(f"bench detection: real frames from {data / 'pcl'} ({RUNS} timed runs)...")
+        result.update(_real_frames(data))
+    else:
+        _info(f"bench detection: no real data at {data}; the real-frame figures are null.")
+    _info("bench detection: kinect2_fps and the simulated recall/precision need the simulator.")
+    if args.json:
+        sys.stdout.write(json.dumps(result) + "\n")
+        sys.stdout.flush()
+    else:
+        for key, value in result.items():
+            _info(f"  {key}: {value}")
+    return 0

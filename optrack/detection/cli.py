@@ -1,0 +1,268 @@
+"""``optrack detect INPUT``: people in a .pcd, a depth image, a recording or a live sensor.
+
+Positions are in the camera frame for a single cloud or image (metres,
+OpenCV axes) and in the world frame for a calibrated recording or sensor
+(the sensor's ground frame when it has no calibration). ``ground`` is the
+floor in the camera frame, ``a x + b y + c z + d = 0`` with the normal
+pointing up towards the camera, so ``d`` is the camera's height.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from optrack.detection.ground import parse_ground
+from optrack.detection.params import SENSOR_MODELS, detection_params
+from optrack.detection.pipeline import PeopleDetector
+from optrack.errors import UserError
+from optrack.params import Params, load_config
+from optrack.types import DetectionBatch, Intrinsics, RGBDFrame
+
+__all__ = ["DetectError", "cmd_detect"]
+
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".pgm", ".exr")
+
+
+class DetectError(UserError):
+    """An input ``optrack detect`` cannot use."""
+
+
+def _info(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def _config_overrides(path: str | None) -> dict[str, Any]:
+    """The ``detection`` values a YAML config file sets (the whole file is validated)."""
+    if not path:
+        return {}
+    load_config(path)  # validates every stage, with one clear sentence on error
+    data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
+    return dict(data.get("detection") or {})
+
+
+def _params(args: argparse.Namespace, model: str | None) -> Params:
+    chosen = args.sensor_model or model
+    if chosen and chosen not in SENSOR_MODELS:
+        chosen = None  # a camera optrack has no figures for: the generic defaults
+    return detection_params(chosen, args.preset, _config_overrides(args.config))
+
+
+def _intrinsics(args: argparse.Namespace, what: str, width: int, height: int) -> Intrinsics:
+    if not args.intrinsics:
+        raise DetectError(
+            f"{what} needs the camera intrinsics; give --intrinsics fx,fy,cx,cy (pixels), "
+            "e.g. --intrinsics 525,525,319.5,239.5 for a Kinect v1."
+        )
+    return Intrinsics.parse(args.intrinsics, width, height)
+
+
+def _detection_json(batch: DetectionBatch, camera_frame: bool) -> list[dict[str, Any]]:
+    out = []
+    for d in batch.detections:
+        x, y, z = d.camera_xyz if camera_frame and d.camera_xyz else (d.x, d.y, d.z)
+        item: dict[str, Any] = {
+            "x": x,
+            "y": y,
+            "z": z,
+            "height": d.height,
+            "confidence": d.confidence,
+            "box": list(d.box),
+            "occluded": d.occluded,
+            "out_of_view": d.out_of_view,
+        }
+        if not camera_frame:
+            item["sensor"] = batch.sensor_id
+            item["t"] = batch.stamp
+            item["seq"] = batch.seq
+            item["camera_xyz"] = list(d.camera_xyz) if d.camera_xyz else None
+        out.append(item)
+    return out
+
+
+def _single(args: argparse.Namespace, source: Path) -> dict[str, Any]:
+    """A .pcd file or a depth image: one frame, camera-frame output."""
+    ground = parse_ground(args.ground) if args.ground else None
+    if source.suffix.lower() == ".pcd":
+        import open3d as o3d
+
+        from optrack.io.pcd import read_pcd
+
+        with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+            cloud = read_pcd(source)  # a damaged file: our one sentence, not Open3D's warnings
+        if not cloud.organized:
+            raise DetectError(
+                f"{source} is an unorganised cloud ({cloud.width} points in one row); the "
+                "detector needs an organised cloud as the sensor saw it (WIDTH x HEIGHT pixels)."
+            )
+        intrinsics = _intrinsics(args, f"the cloud {source}", cloud.width, cloud.height)
+        detector = PeopleDetector(_params(args, "pcl"), sensor_id=source.stem, ground=ground)
+        batch = detector.process_cloud(cloud.points, intrinsics, cloud.colors)
+    else:
+        from optrack.io.images import read_color_image, read_depth_image
+
+        depth = read_depth_image(source)
+        height, width = depth.shape
+        intrinsics = _intrinsics(args, f"the depth image {source}", width, height)
+        scale = args.depth_scale if args.depth_scale is not None else 0.001
+        color = read_color_image(args.color) if args.color else None
+        if color is not None and color.shape[:2] != depth.shape:
+            raise DetectError(
+                f"colour image {args.color} is {color.shape[1]}x{color.shape[0]} but the depth "
+                f"image is {width}x{height}; give a registered colour image of the same size."
+            )
+        frame = RGBDFrame(
+            depth,
+            intrinsics,
+            sensor_id=source.stem,
+            depth_scale=scale if depth.dtype == np.uint16 else 1.0,
+            color=color,
+        )
+        detector = PeopleDetector(_params(args, None), sensor_id=source.stem, ground=ground)
+        batch = detector.process(frame)
+    if batch.ground is None:
+        raise DetectError(
+            f"no floor was found in {source}: no large plane below the camera lies within "
+            f"{detector.params.ground_max_tilt:g} degrees of its down direction; give the floor "
+            "with --ground a,b,c,d (camera frame), or allow a steeper camera with "
+            "detection: ground_max_tilt in a --config file."
+        )
+    return {
+        "input": str(source),
+        "frame_id": "camera",
+        "detections": _detection_json(batch, camera_frame=True),
+        "ground": list(batch.ground),
+        "ground_source": detector.ground.source,
+        "ms": batch.processing_ms,
+        "frames": 1,
+        "confidence_source": detector.last_judgements[0].source
+        if detector.last_judgements
+        else None,
+        "luminance": detector.last_luminance,
+    }
+
+
+def _frames(args: argparse.Namespace) -> Iterator[tuple[RGBDFrame, Any]]:
+    """Frames (with the SensorInfo of their sensor) of a recording or a live sensor."""
+    from optrack.recording import Recording, is_recording
+
+    if is_recording(args.input):
+        recording = Recording(args.input)
+        sensors = [args.sensor] if args.sensor else recording.sensor_ids
+        for sensor in sensors:
+            if sensor not in recording.sensors:
+                raise DetectError(
+                    f"recording {args.input} has no sensor '{sensor}' "
+                    f"(it has: {', '.join(recording.sensor_ids)})."
+                )
+        for frame in recording.frames(sensors):
+            yield frame, recording.sensors[frame.sensor_id]
+        return
+    from optrack.sensors import open_sensor
+
+    with open_sensor(args.input) as sensor:
+        info = sensor.info
+        for frame in sensor:
+            yield frame, info
+
+
+def _stream(args: argparse.Namespace) -> dict[str, Any]:
+    """A recording or a live sensor: frame after frame, one detector per sensor."""
+    ground = parse_ground(args.ground) if args.ground else None
+    detectors: dict[str, PeopleDetector] = {}
+    detections: list[dict[str, Any]] = []
+    times: list[float] = []
+    count = 0
+    for frame, info in _frames(args):
+        if args.frames is not None and count >= args.frames:
+            break
+        detector = detectors.get(frame.sensor_id)
+        if detector is None:
+            pose = np.asarray(info.world_T_camera) if info.world_T_camera is not None else None
+            detector = PeopleDetector(
+                _params(args, info.model),
+                sensor_id=frame.sensor_id,
+                ground=ground,
+                world_T_camera=pose,
+            )
+            detectors[frame.sensor_id] = detector
+        batch = detector.process(frame)
+        times.append(batch.processing_ms)
+        detections.extend(_detection_json(batch, camera_frame=False))
+        count += 1
+        if not args.json:
+            _info(
+                f"{frame.sensor_id} #{frame.seq} t={frame.timestamp:.3f}s: "
+                f"{len(batch.detections)} people ({batch.processing_ms:.1f} ms)"
+            )
+    if count == 0:
+        raise DetectError(f"{args.input} gave no frames; check that it holds depth frames.")
+    grounds = {
+        sid: d.ground.plane.to_list() if d.ground.plane is not None else None
+        for sid, d in detectors.items()
+    }
+    first = next(iter(grounds.values()))
+    frame_ids = {
+        ("world" if d.world_T_camera is not None else "ground") for d in detectors.values()
+    }
+    return {
+        "input": args.input,
+        "frame_id": frame_ids.pop() if len(frame_ids) == 1 else "mixed",
+        "detections": detections,
+        "ground": first,
+        "grounds": grounds,
+        "ms": statistics.median(times),
+        "frames": count,
+        "sensors": sorted(detectors),
+    }
+
+
+def cmd_detect(args: argparse.Namespace) -> int:
+    """The ``optrack detect`` command."""
+    text = str(args.input)
+    source = Path(text)
+    if "://" in text:
+        result = _stream(args)
+    elif source.is_dir():
+        from optrack.recording import is_recording
+
+        if not is_recording(source):
+            raise DetectError(
+                f"{source} is a directory but not an optrack recording (no manifest.yaml); "
+                "give a .pcd file, a depth image, a recording or a sensor URI."
+            )
+        result = _stream(args)
+    elif not source.exists():
+        raise DetectError(
+            f"{source} does not exist; give a .pcd file, a depth image, a recording or a sensor URI."
+        )
+    elif source.suffix.lower() == ".pcd" or source.suffix.lower() in IMAGE_SUFFIXES:
+        result = _single(args, source)
+    else:
+        raise DetectError(
+            f"{source} is neither a .pcd cloud, a depth image ({', '.join(IMAGE_SUFFIXES)}), "
+            "a recording nor a sensor URI."
+        )
+    if args.json:
+        sys.stdout.write(json.dumps(result) + "\n")
+        sys.stdout.flush()
+    else:
+        frame = result["frame_id"]
+        _info(
+            f"{len(result['detections'])} people in {result['frames']} frame(s) of {result['input']} "
+            f"({frame} frame), median {result['ms']:.1f} ms per frame; floor {result['ground']}."
+        )
+        for d in result["detections"][:50]:
+            _info(
+                f"  x={d['x']:.3f} y={d['y']:.3f} z={d['z']:.3f} height={d['height']:.2f} "
+                f"confidence={d['confidence']:.2f}"
+            )
+    return 0

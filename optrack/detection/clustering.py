@@ -1,0 +1,215 @@
+"""Person candidates in the ground-plane frame (Munaro et al. 2012, sections 3.2-3.3).
+
+The floor-free voxels are grouped by Euclidean clustering (connected
+components of the graph joining points closer than a tolerance: SciPy's
+KD-tree and ``connected_components``); clusters that are too tall are
+dropped, clusters whose heads are close on the floor are merged, and
+clusters holding several people are split at the maxima of their height
+profile (PCL's ``HeadBasedSubclustering`` and ``HeightMap2D``).
+
+Everything works in the ground frame of
+:func:`optrack.detection.ground.ground_T_camera`: z is the height above the
+floor, x runs left to right as the camera sees, so tilt is compensated.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.signal import find_peaks
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from optrack.params import Params
+
+__all__ = [
+    "Candidate",
+    "cluster_point_limits",
+    "euclidean_clusters",
+    "head_based_subclusters",
+    "person_candidates",
+]
+
+
+@dataclasses.dataclass
+class Candidate:
+    """A cluster that may be a person, in the ground frame.
+
+    ``points`` are its voxels (Nx3, z up); ``height`` is its highest point
+    above the floor; ``head`` is the floor position (x, y) of the centroid of
+    its top ``head_fraction`` of the height (PCL's head centroid), which is
+    where the person stands.
+    """
+
+    points: np.ndarray
+    height: float
+    head: np.ndarray
+
+    @classmethod
+    def from_points(cls, points: np.ndarray, head_fraction: float) -> Candidate:
+        z = points[:, 2]
+        height = float(z.max())
+        head = points[z >= height * (1.0 - head_fraction), :2].mean(axis=0)  # PCL: top 1/8
+        return cls(points, height, head)
+
+    @property
+    def size(self) -> int:
+        return len(self.points)
+
+    @property
+    def width(self) -> float:
+        """Extent across the camera's view (ground-frame x), metres."""
+        return float(np.ptp(self.points[:, 0]))
+
+    @property
+    def center(self) -> np.ndarray:
+        """The person's centre: half their height, above where they stand (PCL's tcenter)."""
+        return np.array([self.head[0], self.head[1], self.height / 2.0])
+
+
+def cluster_point_limits(params: Params) -> tuple[int, int]:
+    """(fewest, most) voxels of a person cluster: height x width / voxel area (PCL's
+    ``updateMinMaxPoints``)."""
+    area = float(params.voxel_size) ** 2
+    return (
+        int(float(params.min_height) * float(params.min_width) / area),
+        int(float(params.max_height) * float(params.max_width) / area),
+    )
+
+
+def euclidean_clusters(
+    points: np.ndarray, tolerance: float, min_points: int, max_points: int
+) -> list[np.ndarray]:
+    """Indices of each cluster of points linked by steps shorter than ``tolerance``
+    (PCL's EuclideanClusterExtraction), keeping clusters of min..max points."""
+    n = len(points)
+    if n == 0:
+        return []
+    pairs = cKDTree(points, balanced_tree=False).query_pairs(tolerance, output_type="ndarray")
+    graph = coo_matrix(
+        (np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n)
+    )
+    _, labels = connected_components(graph, directed=False)
+    order = np.argsort(labels, kind="stable")
+    counts = np.bincount(labels)
+    groups = np.split(order, np.cumsum(counts)[:-1])
+    return [g for g, c in zip(groups, counts, strict=True) if min_points <= c <= max_points]
+
+
+def _merge_close(
+    candidates: list[Candidate], distance: float, head_fraction: float
+) -> list[Candidate]:
+    """Merge candidates whose heads are closer than ``distance`` on the floor
+    (PCL's ``mergeClustersCloseInFloorCoordinates``, taken transitively)."""
+    if len(candidates) < 2 or distance <= 0:
+        return candidates
+    heads = np.array([c.head for c in candidates])
+    pairs = cKDTree(heads).query_pairs(distance, output_type="ndarray")
+    if len(pairs) == 0:
+        return candidates
+    n = len(candidates)
+    graph = coo_matrix(
+        (np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n)
+    )
+    count, labels = connected_components(graph, directed=False)
+    merged = []
+    for label in range(count):
+        members = np.flatnonzero(labels == label)
+        if len(members) == 1:
+            merged.append(candidates[members[0]])
+        else:
+            points = np.concatenate([candidates[i].points for i in members])
+            merged.append(Candidate.from_points(points, head_fraction))
+    return merged
+
+
+def _head_maxima(points: np.ndarray, bin_size: float, min_distance: float) -> np.ndarray:
+    """Indices (into ``points``) of the heads: maxima of the height profile along x,
+    highest first, each at least ``min_distance`` on the floor from the higher ones
+    (PCL's ``HeightMap2D``: compute, searchLocalMaxima, filterMaxima)."""
+    x, z = points[:, 0], points[:, 2]
+    bins = ((x - x.min()) / bin_size).astype(np.int64)
+    order = np.lexsort((z, bins))  # by bin, then height: the last of each bin is its top
+    sorted_bins = bins[order]
+    last = np.flatnonzero(np.r_[sorted_bins[1:] != sorted_bins[:-1], True])
+    profile = np.zeros(int(bins.max()) + 1)  # empty bins are valleys, as PCL's zeros
+    top_point = np.full(len(profile), -1)
+    profile[sorted_bins[last]] = z[order[last]]
+    top_point[sorted_bins[last]] = order[last]
+    peaks, _ = find_peaks(np.r_[-np.inf, profile, -np.inf])  # the ends can be maxima too
+    peaks = peaks - 1
+    peaks = peaks[np.argsort(-profile[peaks], kind="stable")]
+    kept: list[int] = []
+    for peak in peaks:
+        here = points[top_point[peak], :2]
+        if all(np.linalg.norm(here - points[k, :2]) >= min_distance for k in kept):
+            kept.append(int(top_point[peak]))
+    return np.array(kept, dtype=np.int64)
+
+
+def head_based_subclusters(
+    candidate: Candidate, params: Params, min_points: int
+) -> list[Candidate]:
+    """Split a cluster holding several people at its heads (PCL's ``createSubClusters``).
+
+    Each point joins the first head (highest first) within
+    ``heads_minimum_distance`` of it on the floor; points near no head are
+    dropped, and so are sub-clusters of ``min_points`` points or fewer.
+    """
+    head_fraction = float(params.head_fraction)
+    min_distance = float(params.heads_minimum_distance)
+    maxima = _head_maxima(candidate.points, float(params.voxel_size), min_distance)
+    if len(maxima) <= 1:
+        return [candidate]
+    floor = candidate.points[:, :2]
+    near = np.linalg.norm(floor[:, None, :] - floor[maxima][None, :, :], axis=2) < min_distance
+    owner = np.where(near.any(axis=1), np.argmax(near, axis=1), -1)
+    parts = []
+    for k in range(len(maxima)):
+        members = owner == k
+        if np.count_nonzero(members) > min_points:
+            parts.append(Candidate.from_points(candidate.points[members], head_fraction))
+    return parts
+
+
+def person_candidates(points: np.ndarray, params: Params) -> list[Candidate]:
+    """Person candidates among floor-free voxels (ground frame, z up).
+
+    PCL's chain: Euclidean clustering (tolerance ``cluster_tolerance`` voxel
+    sizes, min..max points from the person limits), drop clusters taller
+    than ``max_height``, merge clusters whose heads are close, split
+    clusters by heads when large enough; then keep candidates whose height
+    and width are within the person limits.
+    """
+    head_fraction = float(params.head_fraction)
+    min_points, max_points = cluster_point_limits(params)
+    tolerance = float(params.cluster_tolerance) * float(params.voxel_size)
+    min_height, max_height = float(params.min_height), float(params.max_height)
+    # Points higher than max_height + tolerance change no kept cluster: a cluster
+    # whose top is at most max_height has all its neighbours below that, and every
+    # cluster reaching above max_height is dropped anyway. Leaving them out saves
+    # clustering walls and ceilings.
+    points = points[points[:, 2] < max_height + tolerance]
+    clusters = [
+        Candidate.from_points(points[idx], head_fraction)
+        for idx in euclidean_clusters(points, tolerance, max(min_points, 1), max_points)
+    ]
+    clusters = [c for c in clusters if c.height <= max_height]
+    clusters = _merge_close(clusters, float(params.merge_distance), head_fraction)
+    split_above = int(min_points * float(params.subcluster_min_points_factor))
+    people: list[Candidate] = []
+    for cluster in clusters:
+        if not min_height < cluster.height < max_height:
+            continue
+        if cluster.size > split_above:
+            people.extend(head_based_subclusters(cluster, params, min_points))
+        else:
+            people.append(cluster)
+    min_width, max_width = float(params.min_width), float(params.max_width)
+    return [
+        c
+        for c in people
+        if min_height <= c.height <= max_height and min_width <= c.width <= max_width
+    ]

@@ -1,0 +1,139 @@
+"""Per-frame detection accuracy against a recording's ground truth.
+
+Each sensor's detections (world frame, from the recording's true poses)
+are matched one to one (Hungarian, SciPy) with the true floor positions of
+the people at the nearest ground-truth instant, within ``radius`` (0.5 m:
+CLEAR MOT's radius in the ground plane, DESIGN.md). Recall counts the
+people at least ``min_visible`` visible from that sensor; precision counts
+a detection as right when it matches anyone in view (a person 30 % visible
+who is found is not a false positive).
+"""
+
+from __future__ import annotations
+
+import bisect
+import dataclasses
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from optrack.detection.params import detection_params
+from optrack.detection.pipeline import PeopleDetector
+from optrack.params import Params
+from optrack.recording import GroundTruth, Recording
+from optrack.types import DetectionBatch
+
+__all__ = ["DetectionScore", "evaluate_recording", "score_batch"]
+
+#: CLEAR MOT's match radius on the floor, metres (DESIGN.md, measurement contract).
+MATCH_RADIUS = 0.5
+#: "At least half visible" (issue 4's recall target).
+MIN_VISIBLE = 0.5
+
+
+@dataclasses.dataclass
+class DetectionScore:
+    """Counts over frames; recall and precision derived."""
+
+    frames: int = 0
+    required: int = 0  # people at least min_visible visible, summed over frames
+    found: int = 0  # of those, matched
+    detections: int = 0
+    correct: int = 0  # detections matched to someone in view
+    ms: list[float] = dataclasses.field(default_factory=list)
+
+    @property
+    def recall(self) -> float | None:
+        return self.found / self.required if self.required else None
+
+    @property
+    def precision(self) -> float | None:
+        return self.correct / self.detections if self.detections else None
+
+    @property
+    def median_ms(self) -> float | None:
+        return float(np.median(self.ms)) if self.ms else None
+
+    def as_dict(self) -> dict[str, float | int | None]:
+        return {
+            "recall": self.recall,
+            "precision": self.precision,
+            "frames": self.frames,
+            "people": self.required,
+            "detections": self.detections,
+            "ms": self.median_ms,
+        }
+
+
+def _matches(found: np.ndarray, truth: np.ndarray, radius: float) -> list[tuple[int, int]]:
+    if len(found) == 0 or len(truth) == 0:
+        return []
+    cost = np.linalg.norm(found[:, None, :] - truth[None, :, :], axis=2)
+    rows, cols = linear_sum_assignment(cost)
+    return [(r, c) for r, c in zip(rows, cols, strict=True) if cost[r, c] <= radius]
+
+
+def score_batch(
+    batch: DetectionBatch,
+    truth: GroundTruth,
+    score: DetectionScore,
+    min_visible: float = MIN_VISIBLE,
+    radius: float = MATCH_RADIUS,
+) -> None:
+    """Add one frame of one sensor to ``score``."""
+    sensor = batch.sensor_id
+    in_view = [p for p in truth.people if p.visible.get(sensor, 0.0) > 0.0]
+    required = [p.visible.get(sensor, 0.0) >= min_visible for p in in_view]
+    found = np.array([(d.x, d.y) for d in batch.detections]).reshape(-1, 2)
+    people = np.array([(p.x, p.y) for p in in_view]).reshape(-1, 2)
+    matched = _matches(found, people, radius)
+    score.frames += 1
+    score.required += sum(required)
+    score.found += sum(1 for _, c in matched if required[c])
+    score.detections += len(found)
+    score.correct += len(matched)
+    score.ms.append(batch.processing_ms)
+
+
+def evaluate_recording(
+    path: str | Path,
+    params: Params | None = None,
+    frames: int | None = None,
+    min_visible: float = MIN_VISIBLE,
+    radius: float = MATCH_RADIUS,
+    progress: Callable[[int], None] | None = None,
+) -> DetectionScore:
+    """Detect in every frame of a simulated recording (true poses as calibration) and
+    score against its ground truth. ``params`` default to each sensor model's."""
+    recording = Recording(path)
+    truths = list(recording.ground_truth())
+    if not truths:
+        raise ValueError(f"recording {path} has no ground truth to score against.")
+    times = [t.t for t in truths]
+    detectors: dict[str, PeopleDetector] = {}
+    score = DetectionScore()
+    for count, frame in enumerate(recording.frames()):
+        if frames is not None and count >= frames:
+            break
+        detector = detectors.get(frame.sensor_id)
+        if detector is None:
+            info = recording.sensors[frame.sensor_id]
+            pose = np.asarray(info.world_T_camera) if info.world_T_camera is not None else None
+            detector = PeopleDetector(
+                params if params is not None else detection_params(info.model),
+                sensor_id=frame.sensor_id,
+                world_T_camera=pose,
+            )
+            detectors[frame.sensor_id] = detector
+        batch = detector.process(frame)
+        i = bisect.bisect_left(times, frame.timestamp)
+        nearest = min(
+            (j for j in (i - 1, i) if 0 <= j < len(times)),
+            key=lambda j: abs(times[j] - frame.timestamp),
+        )
+        score_batch(batch, truths[nearest], score, min_visible, radius)
+        if progress is not None:
+            progress(count + 1)
+    return score

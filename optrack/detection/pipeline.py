@@ -1,0 +1,387 @@
+"""The per-sensor people detector: OpenPTrack's ground-based cascade.
+
+One :class:`PeopleDetector` per sensor composes the stages (Munaro et al.
+2012 section 3; OpenPTrack, Munaro et al. 2016 section 4.2)::
+
+    depth -> valid, in range, subsampled points -> [denoise] -> voxel grid
+          -> ground plane (initialise once, refit per frame unless locked)
+          -> floor removal -> [background subtraction]
+          -> ground frame -> Euclidean clusters -> head-based sub-clusters
+          -> height / width limits -> HOG confidence (colour, infrared, or the
+             depth silhouette when dark) -> DetectionBatch
+
+Positions are in the world frame when the sensor's ``world_T_camera`` is
+known (``frame_id = "world"``), else in the sensor's ground frame
+(``frame_id = "ground"``: origin on the floor under the camera, z up, x
+along the camera's x); ``camera_xyz`` is always the camera-frame centroid.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from optrack.detection.background import BackgroundModel
+from optrack.detection.classifier import (
+    HOG_WINDOW,
+    HogClassifier,
+    equalised_infrared,
+    hsv_histogram,
+    luminance,
+    person_window,
+    window_geometry,
+)
+from optrack.detection.clustering import Candidate, person_candidates
+from optrack.detection.ground import GroundEstimator, GroundStore, check_ground, ground_T_camera
+from optrack.detection.params import detection_params
+from optrack.detection.preprocessing import OrganisedCloud, denoise, select_points, voxel_grid
+from optrack.geometry import Plane, invert, project, transform_points
+from optrack.params import Params
+from optrack.types import Detection, DetectionBatch, Intrinsics, RGBDFrame
+
+__all__ = ["Judgement", "PeopleDetector"]
+
+
+@dataclasses.dataclass
+class Judgement:
+    """What the detector made of one candidate (kept for inspection and tests)."""
+
+    candidate: Candidate
+    confidence: float
+    source: str  # "color", "infrared" or "depth"
+    accepted: bool
+    detection: Detection
+
+
+class PeopleDetector:
+    """People detection for one sensor, frame after frame.
+
+    ``ground`` fixes the floor (camera frame, a,b,c,d); without it the floor
+    is estimated from the first usable frame (see
+    :class:`~optrack.detection.ground.GroundEstimator`), combined with the
+    calibration's floor when ``world_T_camera`` is given.
+    """
+
+    def __init__(
+        self,
+        params: Params | None = None,
+        *,
+        sensor_id: str = "sensor",
+        ground: Plane | Sequence[float] | None = None,
+        world_T_camera: np.ndarray | None = None,
+        ground_store: GroundStore | None = None,
+    ) -> None:
+        self.params = params if params is not None else detection_params()
+        self.sensor_id = sensor_id
+        self.world_T_camera = (
+            np.asarray(world_T_camera, dtype=np.float64) if world_T_camera is not None else None
+        )
+        calibration = None
+        if self.world_T_camera is not None:
+            from optrack.detection.ground import ground_from_calibration
+
+            calibration = ground_from_calibration(self.world_T_camera)
+        self.ground = GroundEstimator(
+            self.params,
+            plane=check_ground(ground) if ground is not None else None,
+            calibration=calibration,
+            store=ground_store,
+            sensor_id=sensor_id,
+        )
+        self.background = BackgroundModel(
+            float(self.params.background_resolution), float(self.params.background_seconds)
+        )
+        self.hog = HogClassifier()
+        self.last_judgements: list[Judgement] = []
+        self.last_luminance: float | None = None
+
+    # ------------------------------------------------------------------ inputs
+    def process(self, frame: RGBDFrame) -> DetectionBatch:
+        """Detect people in one frame of this sensor."""
+        return self._run(
+            OrganisedCloud.from_frame(frame),
+            stamp=frame.timestamp,
+            seq=frame.seq,
+            color=frame.color,
+            color_intrinsics=frame.color_intrinsics,
+            infrared=frame.infrared,
+            confidence=frame.confidence,
+        )
+
+    def process_cloud(
+        self,
+        points: np.ndarray,
+        intrinsics: Intrinsics,
+        color: np.ndarray | None = None,
+        stamp: float = 0.0,
+        seq: int = 0,
+    ) -> DetectionBatch:
+        """Detect people in an organised cloud (HxWx3 camera frame, NaN invalid), as PCL."""
+        return self._run(
+            OrganisedCloud(intrinsics, points=points), stamp=stamp, seq=seq, color=color
+        )
+
+    def relearn_background(self) -> None:
+        """Learn the background again from the next frames (and enable subtraction)."""
+        self.params.update({"background_subtraction": True})
+        self.background = BackgroundModel(
+            float(self.params.background_resolution), float(self.params.background_seconds)
+        )
+
+    # ---------------------------------------------------------------- pipeline
+    def _run(
+        self,
+        cloud: OrganisedCloud,
+        stamp: float,
+        seq: int,
+        color: np.ndarray | None = None,
+        color_intrinsics: Intrinsics | None = None,
+        infrared: np.ndarray | None = None,
+        confidence: np.ndarray | None = None,
+    ) -> DetectionBatch:
+        started = time.perf_counter()
+        p = self.params
+        s = int(p.sampling_factor)
+        points, sampled = select_points(
+            cloud, s, float(p.max_distance), confidence, float(p.confidence_threshold)
+        )
+        if p.apply_denoising:
+            points = denoise(points, int(p.mean_k_denoising), float(p.std_dev_denoising))
+        voxels = voxel_grid(points, float(p.voxel_size))
+        self.last_judgements = []
+        frame_id = "world" if self.world_T_camera is not None else "ground"
+
+        def batch(detections: list[Detection]) -> DetectionBatch:
+            plane = self.ground.plane
+            return DetectionBatch(
+                sensor_id=self.sensor_id,
+                stamp=stamp,
+                seq=seq,
+                frame_id=frame_id,
+                detections=detections,
+                ground=tuple(plane.to_list()) if plane is not None else None,  # type: ignore[arg-type]
+                processing_ms=(time.perf_counter() - started) * 1000.0,
+            )
+
+        if not self.ground.initialise(voxels, len(points) / max(sampled, 1)):
+            return batch([])
+        heights = self.ground.update(voxels)
+        plane = self.ground.plane
+        assert plane is not None
+        foreground = voxels[heights > float(p.ground_inlier_distance)]
+        if p.background_subtraction:
+            if self.background.learning and self.background.learn(voxels, stamp):
+                pass  # still learning: this frame is detected without subtraction
+            else:
+                foreground = foreground[self.background.foreground(foreground)]
+        g_T_c = ground_T_camera(plane)
+        candidates = person_candidates(transform_points(g_T_c, foreground), p)
+        if not candidates:
+            return batch([])
+
+        image, image_intrinsics, source = self._hog_image(
+            cloud.intrinsics, color, color_intrinsics, infrared
+        )
+        c_T_g = invert(g_T_c)
+        out: list[Detection] = []
+        for candidate in candidates:
+            judgement = self._judge(
+                candidate,
+                cloud,
+                g_T_c,
+                c_T_g,
+                image,
+                image_intrinsics,
+                source,
+                color,
+                color_intrinsics or cloud.intrinsics,
+            )
+            self.last_judgements.append(judgement)
+            if judgement.accepted:
+                out.append(judgement.detection)
+        return batch(out)
+
+    def _hog_image(
+        self,
+        intrinsics: Intrinsics,
+        color: np.ndarray | None,
+        color_intrinsics: Intrinsics | None,
+        infrared: np.ndarray | None,
+    ) -> tuple[np.ndarray | None, Intrinsics, str]:
+        """The image HOG runs on, its intrinsics, and the confidence source.
+
+        Colour when bright enough (OpenPTrack's luminance gate), else the
+        equalised infrared image when there is one, else the depth silhouette.
+        """
+        p = self.params
+        self.last_luminance = None
+        if p.use_rgb and p.hog_image in ("auto", "color") and color is not None:
+            self.last_luminance = luminance(color)
+            if self.last_luminance >= float(p.minimum_luminance):
+                return color, color_intrinsics or intrinsics, "color"
+        if p.use_rgb and p.hog_image in ("auto", "infrared") and infrared is not None:
+            return equalised_infrared(infrared), intrinsics, "infrared"
+        return None, intrinsics, "depth"
+
+    def _judge(
+        self,
+        candidate: Candidate,
+        cloud: OrganisedCloud,
+        g_T_c: np.ndarray,
+        c_T_g: np.ndarray,
+        image: np.ndarray | None,
+        image_intrinsics: Intrinsics,
+        source: str,
+        color: np.ndarray | None,
+        color_intrinsics: Intrinsics,
+    ) -> Judgement:
+        p = self.params
+        hx, hy = candidate.head
+        key_points_g = np.array(
+            [[hx, hy, candidate.height], [hx, hy, 0.0], [hx, hy, candidate.height / 2.0]]
+        )
+        top_c, bottom_c, center_c = transform_points(c_T_g, key_points_g)
+        pixels, _ = project(np.stack([top_c, bottom_c, center_c]), cloud.intrinsics)
+        window_box = window_geometry(pixels[0], pixels[1], pixels[2], float(p.hog_window_fill))
+
+        # The candidate's pixels: a strided crop of its HOG window, in the ground frame.
+        rows_img, cols_img = cloud.shape
+        stride = max(1, round(window_box[3] / HOG_WINDOW[1]))
+        xmin, ymin, width, height = window_box
+        u0 = max(xmin, 0)
+        v0 = max(ymin, 0)
+        u1 = min(xmin + width, cols_img)
+        v1 = min(ymin + height, rows_img)
+        if u1 > u0 and v1 > v0:
+            crop_c = cloud.grid(slice(v0, v1, stride), slice(u0, u1, stride))
+            crop_g = transform_points(g_T_c, crop_c)
+        else:
+            crop_c = crop_g = np.full((0, 0, 3), np.nan)
+        valid = np.isfinite(crop_g[..., 2])
+        floor_band = float(p.ground_inlier_distance)
+        radius = float(p.person_radius)
+        with np.errstate(invalid="ignore"):
+            near_axis = np.hypot(crop_g[..., 0] - hx, crop_g[..., 1] - hy) < radius
+            above_floor = crop_g[..., 2] > floor_band
+            mask = (
+                valid
+                & near_axis
+                & above_floor
+                & (crop_g[..., 2] < candidate.height + float(p.voxel_size))
+            )
+
+        if source == "depth":
+            silhouette = person_window(
+                (mask * np.uint8(255)).astype(np.uint8), window_box, (u0, v0), stride
+            )
+            score = float(self.hog.scores([silhouette])[0])
+            accepted = score > float(p.min_depth_confidence)
+        else:
+            assert image is not None
+            if image_intrinsics is not cloud.intrinsics:
+                image_pixels, _ = project(np.stack([top_c, bottom_c, center_c]), image_intrinsics)
+                image_box = window_geometry(
+                    image_pixels[0], image_pixels[1], image_pixels[2], float(p.hog_window_fill)
+                )
+            else:
+                image_box = window_box
+            score = float(self.hog.scores([person_window(image, image_box)])[0])
+            accepted = score > float(p.min_confidence)
+
+        # Flags, histogram, output box.
+        person_px = float(pixels[1][1] - pixels[0][1])
+        out_of_view = self._outside_fraction(pixels, person_px, (rows_img, cols_img)) > float(
+            p.out_of_view_fraction
+        )
+        occluded = self._occluded(
+            crop_g, valid, candidate, pixels, (u0, v0), stride, cloud.intrinsics, float(center_c[2])
+        )
+        histogram: list[float] = []
+        if color is not None and np.any(mask):
+            person_points = crop_c[mask]
+            uv, _ = project(person_points, color_intrinsics)
+            u = np.rint(uv[:, 0]).astype(np.int64)
+            v = np.rint(uv[:, 1]).astype(np.int64)
+            inside = (u >= 0) & (u < color.shape[1]) & (v >= 0) & (v < color.shape[0])
+            histogram = hsv_histogram(
+                color[v[inside], u[inside]],
+                int(p.histogram_hue_bins),
+                int(p.histogram_saturation_bins),
+            )
+        box_h = person_px * float(p.box_enlarge_factor)
+        box_w = box_h / 2.0
+        bx0 = max(0, int(pixels[2][0] - box_w / 2.0))
+        by0 = max(0, int(pixels[2][1] - box_h / 2.0))
+        bx1 = min(cols_img, int(pixels[2][0] + box_w / 2.0))
+        by1 = min(rows_img, int(pixels[2][1] + box_h / 2.0))
+        compensation = float(p.centroid_depth_compensation)
+        camera_xyz = center_c * (1.0 + compensation / float(np.linalg.norm(center_c)))
+        if self.world_T_camera is not None:
+            position = transform_points(self.world_T_camera, camera_xyz[None])[0]
+        else:
+            position = transform_points(g_T_c, camera_xyz[None])[0]
+        detection = Detection(
+            x=float(position[0]),
+            y=float(position[1]),
+            z=float(position[2]),
+            height=float(candidate.height),
+            confidence=score,
+            box=(bx0, by0, max(bx1 - bx0, 0), max(by1 - by0, 0)),
+            camera_xyz=(float(camera_xyz[0]), float(camera_xyz[1]), float(camera_xyz[2])),
+            occluded=bool(occluded),
+            out_of_view=bool(out_of_view),
+            histogram=histogram,
+        )
+        return Judgement(candidate, score, source, accepted, detection)
+
+    @staticmethod
+    def _outside_fraction(pixels: np.ndarray, person_px: float, shape: tuple[int, int]) -> float:
+        """Fraction of the head-to-floor box (width half its height) outside the image."""
+        rows, cols = shape
+        top, bottom = pixels[0][1], pixels[1][1]
+        half = person_px / 4.0
+        left, right = pixels[2][0] - half, pixels[2][0] + half
+        area = max((bottom - top) * (right - left), 1e-9)
+        inside_w = max(0.0, min(right, cols) - max(left, 0.0))
+        inside_h = max(0.0, min(bottom, rows) - max(top, 0.0))
+        return float(1.0 - inside_w * inside_h / area)
+
+    def _occluded(
+        self,
+        crop_g: np.ndarray,
+        valid: np.ndarray,
+        candidate: Candidate,
+        pixels: np.ndarray,
+        origin: tuple[int, int],
+        stride: int,
+        intrinsics: Intrinsics,
+        depth: float,
+    ) -> bool:
+        """Whether more than ``occlusion_fraction`` of the pixels in front of the body
+        (head to floor, ``person_radius`` either side of its axis) show something above
+        the floor and nearer to the sensor than the person by ``occlusion_margin``."""
+        p = self.params
+        if crop_g.size == 0:
+            return False
+        hx, hy = candidate.head
+        person_range = math.hypot(hx, hy)  # the camera stands over the ground frame's origin
+        u0, v0 = origin
+        half = float(p.person_radius) * intrinsics.fx / max(depth, 1e-6)
+        c0 = max(0, int((pixels[2][0] - half - u0) / stride))
+        c1 = min(crop_g.shape[1], int(math.ceil((pixels[2][0] + half - u0) / stride)))
+        r0 = max(0, int((pixels[0][1] - v0) / stride))
+        r1 = min(crop_g.shape[0], int(math.ceil((pixels[1][1] - v0) / stride)))
+        if c1 <= c0 or r1 <= r0:
+            return False
+        body = crop_g[r0:r1, c0:c1]
+        with np.errstate(invalid="ignore"):
+            nearer = (
+                valid[r0:r1, c0:c1]
+                & (body[..., 2] > float(p.ground_inlier_distance))
+                & (np.hypot(body[..., 0], body[..., 1]) < person_range - float(p.occlusion_margin))
+            )
+        return float(np.count_nonzero(nearer)) / nearer.size > float(p.occlusion_fraction)

@@ -1,0 +1,176 @@
+"""Preprocessing: from a frame (or an organised cloud) to a voxelised cloud.
+
+OpenPTrack's ``preprocessCloud`` (Munaro 2012, section 3.1): keep valid
+pixels within ``max_distance`` (and, for time-of-flight sensors, above a
+confidence), keep every ``sampling_factor``-th pixel in rows and columns,
+optionally remove statistical outliers, then a voxel grid. Open3D does the
+voxel grid and the outlier removal.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import cv2
+import numpy as np
+import open3d as o3d
+
+from optrack.errors import UserError
+from optrack.types import Intrinsics, RGBDFrame
+
+__all__ = ["OrganisedCloud", "check_intrinsics", "denoise", "select_points", "voxel_grid"]
+
+
+@functools.lru_cache(maxsize=8)
+def _rays(intrinsics: Intrinsics, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """x/z and y/z of every pixel centre (HxW float64 each), distortion undone."""
+    u = np.arange(width, dtype=np.float64)
+    v = np.arange(height, dtype=np.float64)
+    if not intrinsics.has_distortion:
+        x = (u - intrinsics.cx) / intrinsics.fx
+        y = (v - intrinsics.cy) / intrinsics.fy
+        return np.broadcast_to(x, (height, width)), np.broadcast_to(y[:, None], (height, width))
+    uu, vv = np.meshgrid(u, v)
+    pixels = np.stack([uu.ravel(), vv.ravel()], axis=1).reshape(-1, 1, 2)
+    normalised = cv2.undistortPoints(pixels, intrinsics.K, intrinsics.dist_coeffs)
+    normalised = normalised.reshape(height, width, 2)
+    return normalised[..., 0].copy(), normalised[..., 1].copy()
+
+
+class OrganisedCloud:
+    """A frame seen as an organised cloud: camera-frame points per pixel, on demand.
+
+    Built either from a depth image (float metres, NaN or 0 invalid; or
+    uint16 with ``depth_scale``) and intrinsics, or from an organised HxWx3
+    cloud as PCL stores it (NaN invalid). Points are computed only for the
+    pixels asked for (strided windows), so that subsampled and cropped uses
+    stay cheap.
+    """
+
+    def __init__(
+        self,
+        intrinsics: Intrinsics,
+        depth: np.ndarray | None = None,
+        depth_scale: float = 1.0,
+        points: np.ndarray | None = None,
+    ) -> None:
+        if (depth is None) == (points is None):
+            raise ValueError("give either a depth image or an organised cloud, not both.")
+        self.intrinsics = intrinsics
+        self._depth = depth
+        self._scale = depth_scale
+        self._points = points
+        if points is not None:
+            if points.ndim != 3 or points.shape[2] != 3:
+                raise ValueError(f"an organised cloud is HxWx3; got shape {points.shape}.")
+            self.shape: tuple[int, int] = points.shape[:2]
+        else:
+            assert depth is not None
+            if depth.ndim != 2:
+                raise ValueError(f"a depth image is HxW; got shape {depth.shape}.")
+            self.shape = depth.shape  # type: ignore[assignment]
+
+    @classmethod
+    def from_frame(cls, frame: RGBDFrame) -> OrganisedCloud:
+        return cls(frame.intrinsics, depth=frame.depth, depth_scale=frame.depth_scale)
+
+    @property
+    def stored(self) -> bool:
+        """True for a stored cloud (x, y, z per pixel), False for a depth image."""
+        return self._points is not None
+
+    def z(self, rows: slice, cols: slice) -> np.ndarray:
+        """Depth (metres, float32, NaN where invalid) of a strided window of pixels."""
+        if self._points is not None:
+            return self._points[rows, cols, 2]
+        assert self._depth is not None
+        raw = self._depth[rows, cols]
+        if raw.dtype == np.uint16:
+            z = raw.astype(np.float32) * np.float32(self._scale)
+            z[raw == 0] = np.nan
+            return z
+        z = raw.astype(np.float32, copy=True)
+        z[~(z > 0)] = np.nan
+        return z
+
+    def grid(self, rows: slice, cols: slice) -> np.ndarray:
+        """Camera-frame points of a strided window, hxwx3 float64 (NaN where invalid)."""
+        if self._points is not None:
+            return self._points[rows, cols].astype(np.float64)
+        z = self.z(rows, cols).astype(np.float64)
+        x_over_z, y_over_z = _rays(self.intrinsics, *self.shape)
+        return np.stack([x_over_z[rows, cols] * z, y_over_z[rows, cols] * z, z], axis=-1)
+
+    def xyz(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Camera-frame points (Nx3 float64) of the pixels (rows[i], cols[i])."""
+        if self._points is not None:
+            return self._points[rows, cols].astype(np.float64)
+        z = self.z(slice(None), slice(None))[rows, cols].astype(np.float64)
+        x_over_z, y_over_z = _rays(self.intrinsics, *self.shape)
+        return np.stack([x_over_z[rows, cols] * z, y_over_z[rows, cols] * z, z], axis=1)
+
+
+def select_points(
+    cloud: OrganisedCloud,
+    sampling_factor: int,
+    max_distance: float,
+    confidence: np.ndarray | None = None,
+    confidence_threshold: float = 0,
+) -> tuple[np.ndarray, int]:
+    """Valid points of every ``sampling_factor``-th pixel in rows and columns
+    (Nx3 float64, camera frame), and how many pixels were looked at.
+
+    A pixel is valid with depth in (0, max_distance] and, when a confidence
+    image is given, confidence >= ``confidence_threshold``.
+    """
+    s = int(sampling_factor)
+    if s < 1:
+        raise ValueError(f"sampling_factor must be >= 1; got {sampling_factor}.")
+    window = (slice(None, None, s), slice(None, None, s))
+    z = cloud.z(*window)
+    keep = (z > 0) & (z <= max_distance)  # NaN compares False
+    if confidence is not None and confidence_threshold > 0:
+        keep &= confidence[window] >= confidence_threshold
+    keep = keep.ravel()
+    if cloud.stored:
+        stored = cloud._points[window].reshape(-1, 3)  # type: ignore[index]
+        points = np.compress(keep, stored, axis=0)
+    else:
+        depth = np.compress(keep, z.ravel()).astype(np.float64)
+        x_over_z, y_over_z = _rays(cloud.intrinsics, *cloud.shape)
+        points = np.stack(
+            [
+                np.compress(keep, x_over_z[window].ravel()) * depth,
+                np.compress(keep, y_over_z[window].ravel()) * depth,
+                depth,
+            ],
+            axis=1,
+        )
+    return np.ascontiguousarray(points, dtype=np.float64), z.size
+
+
+def voxel_grid(points: np.ndarray, voxel_size: float) -> np.ndarray:
+    """Centroid of the points in each occupied voxel (Open3D's voxel grid), Mx3 float64."""
+    if len(points) == 0:
+        return np.empty((0, 3))
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    return np.asarray(cloud.voxel_down_sample(float(voxel_size)).points)
+
+
+def denoise(points: np.ndarray, mean_k: int, std_dev: float) -> np.ndarray:
+    """Drop statistical outliers (PCL's StatisticalOutlierRemoval, through Open3D)."""
+    if len(points) <= mean_k:
+        return points
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    _, kept = cloud.remove_statistical_outlier(int(mean_k), float(std_dev))
+    return points[np.asarray(kept, dtype=np.int64)]
+
+
+def check_intrinsics(intrinsics: Intrinsics | None, what: str) -> Intrinsics:
+    """The intrinsics, or a :class:`UserError` saying they are needed."""
+    if intrinsics is None:
+        raise UserError(
+            f"{what} needs the camera intrinsics; give --intrinsics fx,fy,cx,cy (pixels), "
+            "e.g. --intrinsics 525,525,319.5,239.5 for a Kinect v1."
+        )
+    return intrinsics

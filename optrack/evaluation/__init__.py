@@ -1,0 +1,1 @@
+"""Evaluation: CLEAR MOT scores, replays of detection streams, synthetic scenes, benchmarks."""

@@ -1,0 +1,161 @@
+"""How a node joins the bus: the ``bus`` parameters and the Zenoh configuration they make.
+
+Modes (``bus.mode``):
+
+* ``local`` (default): one computer, loopback only. The tracker node hosts a
+  Zenoh router on ``tcp/127.0.0.1:<local_port>``; every other node is a client
+  of it. Nothing listens on, or scouts, any other interface.
+* ``peer``: a real network. Nodes find each other by Zenoh's multicast
+  scouting (``multicast_scouting``) and gossip, and/or the explicit
+  ``connect`` endpoints; ``listen`` says where this node accepts links.
+* ``client``: connect to the router(s) in ``connect`` (e.g. a ``zenohd``).
+* ``router``: route for others, listening on ``listen``.
+
+``zenoh_config`` names a Zenoh JSON5 file used as it is instead (TLS,
+access control, namespaces...).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import zenoh
+
+from optrack.errors import UserError
+from optrack.params import Param, Params, Schema, register
+
+__all__ = ["BUS_PARAMS", "BusConfigError", "endpoints", "zenoh_config"]
+
+BUS_PARAMS = register(
+    Schema(
+        "bus",
+        [
+            Param(
+                "mode",
+                "local",
+                choices=("local", "peer", "client", "router"),
+                help="local: this computer only (loopback); peer: a real network with "
+                "scouting or endpoints; client/router: Zenoh client or router.",
+            ),
+            Param(
+                "local_port",
+                7447,
+                min=1,
+                max=65535,
+                step=1,
+                help="Loopback TCP port of the local site's hub (mode local).",
+            ),
+            Param(
+                "listen",
+                "",
+                help="Comma-separated Zenoh endpoints to listen on (peer/router), e.g. "
+                "tcp/0.0.0.0:7447; empty: Zenoh's default.",
+            ),
+            Param(
+                "connect",
+                "",
+                help="Comma-separated Zenoh endpoints to connect to, e.g. tcp/192.168.1.10:7447.",
+            ),
+            Param(
+                "multicast_scouting",
+                True,
+                help="Find other nodes by UDP multicast on the local network (peer/client).",
+            ),
+            Param("gossip", True, help="Let peers tell each other where they listen (peer)."),
+            Param(
+                "zenoh_config",
+                "",
+                help="Path of a Zenoh JSON5 configuration used as it is (overrides the rest).",
+            ),
+            Param(
+                "connect_timeout_s",
+                10.0,
+                min=0.0,
+                max=600.0,
+                step=0.5,
+                unit="s",
+                help="How long a node keeps trying to reach the bus when it starts.",
+            ),
+            Param(
+                "max_message_bytes",
+                4 * 1024 * 1024,
+                min=1024,
+                max=256 * 1024 * 1024,
+                step=1024,
+                unit="bytes",
+                help="Larger received messages are refused (and counted).",
+            ),
+        ],
+        help="The Zenoh bus: how nodes of a site find each other.",
+    )
+)
+
+
+class BusConfigError(UserError):
+    """A bus configuration that cannot work."""
+
+
+def endpoints(text: str) -> list[str]:
+    """Comma-separated endpoints as a list (blank entries dropped)."""
+    items = [e.strip() for e in str(text).split(",") if e.strip()]
+    for item in items:
+        if "/" not in item:
+            raise BusConfigError(
+                f"bus endpoint '{item}' lacks a protocol; write it as tcp/HOST:PORT."
+            )
+    return items
+
+
+def local_endpoint(params: Params) -> str:
+    return f"tcp/127.0.0.1:{int(params.local_port)}"
+
+
+def _set(config: zenoh.Config, key: str, value: object) -> None:
+    config.insert_json5(key, json.dumps(value))
+
+
+def zenoh_config(params: Params, *, host: bool = False) -> zenoh.Config:
+    """The Zenoh configuration of a node. ``host``: this node hosts a local site's hub."""
+    if params.zenoh_config:
+        path = Path(str(params.zenoh_config)).expanduser()
+        if not path.is_file():
+            raise BusConfigError(
+                f"bus.zenoh_config {path} does not exist; fix the path or leave it empty."
+            )
+        try:
+            return zenoh.Config.from_file(str(path))
+        except zenoh.ZError as error:
+            raise BusConfigError(f"bus.zenoh_config {path} is not a valid Zenoh file: {error}") from None
+    config = zenoh.Config()
+    mode = str(params.mode)
+    listen = endpoints(str(params.listen))
+    connect = endpoints(str(params.connect))
+    multicast = bool(params.multicast_scouting)
+    gossip = bool(params.gossip)
+    if mode == "local":
+        for endpoint in listen + connect:
+            if not (endpoint.startswith("tcp/127.") or endpoint.startswith("tcp/localhost")):
+                raise BusConfigError(
+                    f"bus.mode local stays on this computer, but endpoint '{endpoint}' is not "
+                    "loopback; use bus.mode peer for a real network."
+                )
+        if host:
+            mode, listen, connect = "router", [local_endpoint(params)], []
+        else:
+            mode, listen, connect = "client", [], [local_endpoint(params)]
+        multicast = gossip = False
+    elif mode == "client" and not connect and not multicast:
+        raise BusConfigError(
+            "bus.mode client needs bus.connect endpoints (or bus.multicast_scouting on) to find "
+            "a router."
+        )
+    _set(config, "mode", mode)
+    if listen or str(params.mode) == "local":
+        _set(config, "listen/endpoints", listen)
+    _set(config, "connect/endpoints", connect)
+    _set(config, "scouting/multicast/enabled", multicast)
+    _set(config, "scouting/gossip/enabled", gossip)
+    if mode == "router":
+        _set(config, "scouting/delay", 0)
+    return config

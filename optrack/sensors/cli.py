@@ -1,0 +1,252 @@
+"""``optrack sensors`` (list attached cameras) and ``optrack record`` (record live sensors)."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import queue
+import sys
+import threading
+import time
+from collections.abc import Iterator
+
+from optrack.cli import EXIT_ERROR, EXIT_OK, CommandError, emit_json, info
+from optrack.errors import UserError
+from optrack.recording import RecordingWriter
+from optrack.sensors.base import Sensor, SensorError
+from optrack.types import RGBDFrame
+
+__all__ = ["cmd_record", "cmd_sensors"]
+
+
+@contextlib.contextmanager
+def _log_to_stderr() -> Iterator[None]:
+    """Show optrack's warnings (reconnections, mode choices) on stderr while a command runs."""
+    logger = logging.getLogger("optrack")
+    if logger.handlers:
+        yield
+        return
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("optrack: %(message)s"))
+    logger.addHandler(handler)
+    level = logger.level
+    logger.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
+# ------------------------------------------------------------------ sensors
+
+
+def cmd_sensors(args: argparse.Namespace) -> int:
+    """List the depth cameras on the USB bus (``devices``)."""
+    from optrack.sensors import usb
+
+    if getattr(args, "udev_rules", False):
+        sys.stdout.write(usb.udev_rules())
+        return EXIT_OK
+    cameras = usb.list_cameras()
+    devices = [camera.as_dict() for camera in cameras]
+    if any(c.known.backend == usb.REALSENSE for c in cameras):
+        _realsense_serials(cameras, devices)
+    for camera in cameras:
+        if camera.access == "denied":
+            info(usb.permission_message(camera))
+    if args.json:
+        emit_json({"devices": devices})
+        return EXIT_OK
+    if not devices:
+        print("No depth camera is attached (openni://Dummy is OpenNI2's test device).")
+        return EXIT_OK
+    for device in devices:
+        uri = device["uri"] or "(no optrack backend)"
+        serial = f"  serial {device['serial']}" if device["serial"] else ""
+        print(
+            f"{uri:40s} {device['model']}  [{device['vendor_id']}:{device['product_id']}]"
+            f"  bus {device['bus']} device {device['address']}{serial}"
+        )
+    return EXIT_OK
+
+
+def _realsense_serials(cameras: list, devices: list[dict]) -> None:
+    """Give RealSense cameras the serial librealsense knows them by, when it is installed."""
+    from optrack.sensors import realsense
+
+    try:
+        seen = realsense.attached_devices()
+    except SensorError:
+        return
+    for camera, device in zip(cameras, devices, strict=True):
+        if camera.known.backend != "realsense":
+            continue
+        pid = f"{camera.known.product_id:04x}"
+        same_pid = [s for s in seen if s["product_id"] == pid]
+        by_port = [s for s in same_pid if camera.port_path and f"/{camera.port_path}/" in s["port"]]
+        match = by_port or (same_pid if len(same_pid) == 1 else [])
+        if match:
+            device["serial"] = match[0]["serial"]
+            device["uri"] = f"realsense://{match[0]['serial']}"
+
+
+# ------------------------------------------------------------------- record
+
+
+class _Capture(threading.Thread):
+    """Reads one sensor until told to stop; frames go to the shared queue."""
+
+    def __init__(self, sensor: Sensor, out: queue.Queue, stop: threading.Event) -> None:
+        super().__init__(name=f"capture-{sensor.uri}", daemon=True)
+        self.sensor = sensor
+        self.out = out
+        self.stop_event = stop
+        self.error: UserError | None = None
+        self.ended = False
+
+    def run(self) -> None:
+        try:
+            while not self.stop_event.is_set():
+                frame = self.sensor.read()
+                if frame is None:
+                    self.ended = True
+                    return
+                self.out.put((time.monotonic(), frame))
+        except UserError as error:
+            self.error = error
+        finally:
+            self.out.put((time.monotonic(), None))
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    """Record live sensors for ``--seconds`` into a new recording directory."""
+    from optrack.sensors.uri import open_sensor
+
+    if not args.seconds > 0:
+        raise CommandError(f"--seconds must be > 0; got {args.seconds:g}.")
+    with _log_to_stderr():
+        sensors: list[Sensor] = []
+        try:
+            for uri in args.sensor:
+                sensors.append(open_sensor(uri))
+            return _record(args, sensors)
+        finally:
+            for sensor in sensors:
+                sensor.close()
+
+
+def _record(args: argparse.Namespace, sensors: list[Sensor]) -> int:
+    infos = [sensor.info for sensor in sensors]
+    ids = [i.id for i in infos]
+    for sid in ids:
+        if ids.count(sid) > 1:
+            raise CommandError(
+                f"two sensors have the id '{sid}'; give one another id, e.g. "
+                f"{sensors[ids.index(sid)].uri}?id={sid}-2 (in quotes)."
+            )
+    frames: queue.Queue[tuple[float, RGBDFrame | None]] = queue.Queue(maxsize=64 * len(sensors))
+    stop = threading.Event()
+    writer = RecordingWriter(
+        args.out, infos, source="optrack record " + " ".join(s.uri for s in sensors)
+    )
+    captures = [_Capture(sensor, frames, stop) for sensor in sensors]
+    interactive = sys.stderr.isatty()
+    started = time.monotonic()
+    deadline = started + float(args.seconds)
+    for capture in captures:
+        capture.start()
+    running = len(captures)
+    last_report = started
+    interrupted = False
+    try:
+        while running and time.monotonic() < deadline:
+            try:
+                arrived, frame = frames.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            if frame is None:
+                running -= 1
+            elif arrived <= deadline:
+                writer.write(frame)
+            now = time.monotonic()
+            if now - last_report >= (0.25 if interactive else 1.0):
+                last_report = now
+                _progress(writer.frame_counts, now - started, float(args.seconds), interactive)
+    except KeyboardInterrupt:
+        interrupted = True
+        raise
+    finally:
+        elapsed = min(time.monotonic(), deadline) - started
+        _stop_captures(captures, sensors, stop, frames, writer, deadline, interrupted)
+        writer.close()
+    counts = writer.frame_counts
+    _progress(counts, elapsed, float(args.seconds), interactive, final=True)
+    errors = [c.error for c in captures if c.error is not None]
+    total = sum(counts.values())
+    payload = {
+        "out": str(args.out),
+        "seconds": round(elapsed, 3),
+        "frames": total,
+        "sensors": [
+            {
+                "id": sensor_info.id,
+                "uri": sensor.uri,
+                "model": sensor_info.model,
+                "frames": counts[sensor_info.id],
+                "fps": round(counts[sensor_info.id] / elapsed, 2) if elapsed > 0 else 0.0,
+                "dropped": int(getattr(sensor, "dropped", 0)),
+                "reconnects": int(getattr(sensor, "reconnects", 0)),
+            }
+            for sensor, sensor_info in zip(sensors, infos, strict=True)
+        ],
+    }
+    if errors:
+        payload["error"] = str(errors[0])
+        info(f"optrack record: {errors[0]} (the frames before it are saved in {args.out}).")
+    if args.json:
+        emit_json(payload)
+    else:
+        info(f"wrote {args.out}: {total} frames in {elapsed:.1f} s.")
+    return EXIT_ERROR if errors else EXIT_OK
+
+
+def _stop_captures(
+    captures: list[_Capture],
+    sensors: list[Sensor],
+    stop: threading.Event,
+    frames: queue.Queue,
+    writer: RecordingWriter,
+    deadline: float,
+    interrupted: bool,
+) -> None:
+    """Stop the capture threads, writing the frames that arrived before the deadline."""
+    stop.set()
+    for sensor in sensors:
+        interrupt = getattr(sensor, "interrupt", None)
+        if interrupt is not None:
+            interrupt()  # a camera being reconnected stops waiting
+    give_up = time.monotonic() + 10.0
+    while any(c.is_alive() for c in captures) or not frames.empty():
+        try:
+            arrived, frame = frames.get(timeout=0.05)
+        except queue.Empty:
+            if time.monotonic() > give_up:
+                break
+            continue
+        if frame is not None and arrived <= deadline and not interrupted:
+            writer.write(frame)
+
+
+def _progress(
+    counts: dict[str, int], elapsed: float, seconds: float, interactive: bool, final: bool = False
+) -> None:
+    parts = ", ".join(f"{sid} {n}" for sid, n in counts.items())
+    line = f"recording {min(elapsed, seconds):.1f}/{seconds:g} s: {parts} frames"
+    if interactive:
+        end = "\n" if final else ""
+        sys.stderr.write(f"\r{line}{end}")
+        sys.stderr.flush()
+    elif not final:
+        info(line)

@@ -1,0 +1,791 @@
+"""OpenNI2 cameras (Kinect v1, Asus Xtion, PrimeSense Carmine, Orbbec Astra) on Debian's libopenni2.
+
+``openni://<serial, OpenNI URI or Dummy>`` opens a camera by its serial
+number, by the URI OpenNI2 gives it (``1d27/0601@1/5``: vendor/product@bus/
+address, as ``optrack sensors`` lists it), or OpenNI2's built-in test device
+``Dummy`` (320x240 depth and colour at 30 fps). An empty target opens the
+first camera attached.
+
+What it does: depth (millimetres or 100 um, as uint16), colour (RGB) and
+infrared when the device has them; the video mode nearest the ``openni``
+parameters; depth-to-colour registration and depth/colour frame sync where
+the device supports them; colour frames paired with depth frames by device
+timestamp; intrinsics from the device's fields of view (or nominal PrimeSense
+values when the driver reports none); reconnection after an unplug (see
+:class:`~optrack.sensors.live.LiveSensor`).
+
+Clean exit: Debian's OpenNI2 drivers keep a frame thread running shortly
+after a stream is stopped, so destroying the stream at once (as the ``openni``
+binding's exit hook does) can crash the process, and so can ``oniShutdown``
+after the Dummy device streamed. This module replaces the binding's hook: at
+exit it closes every open sensor and leaves the rest to the process exit.
+Closing a sensor stops its streams (no sooner than three frame periods after
+starting them: the Dummy driver crashes otherwise), waits two frame periods,
+then destroys them and closes the device.
+"""
+
+from __future__ import annotations
+
+import atexit
+import collections
+import ctypes
+import logging
+import math
+import os
+import re
+import sysconfig
+import threading
+import time
+import weakref
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from optrack.params import Param, Params, Schema, register
+from optrack.recording.format import SensorInfo
+from optrack.sensors.base import SensorError
+from optrack.sensors.live import DeviceLost, LiveSensor, Mode, live_params, nearest_mode
+from optrack.types import Intrinsics, RGBDFrame
+
+__all__ = [
+    "NOMINAL_FOV_DEG",
+    "OPENNI_PARAMS",
+    "OpenNISensor",
+    "attached_devices",
+    "intrinsics_from_fov",
+]
+
+log = logging.getLogger(__name__)
+
+OPENNI_PARAMS = register(
+    Schema(
+        "openni",
+        [
+            Param(
+                "width",
+                640,
+                min=1,
+                max=4096,
+                step=1,
+                unit="px",
+                help="Depth image width wanted; the device's nearest mode is used.",
+            ),
+            Param(
+                "height",
+                480,
+                min=1,
+                max=4096,
+                step=1,
+                unit="px",
+                help="Depth image height wanted; the device's nearest mode is used.",
+            ),
+            Param(
+                "fps",
+                30,
+                min=1,
+                max=120,
+                step=1,
+                unit="Hz",
+                help="Frame rate wanted; the device's nearest mode is used.",
+            ),
+            Param("color", True, help="Capture colour when the device has a colour camera."),
+            Param(
+                "infrared",
+                False,
+                help=(
+                    "Capture infrared when the device has it (PrimeSense cameras cannot send "
+                    "infrared and colour together: turn colour off)."
+                ),
+            ),
+            Param(
+                "registration",
+                True,
+                help="Register depth to the colour camera when the device supports it.",
+            ),
+            Param(
+                "sync", True, help="Ask for depth/colour frame sync when the device supports it."
+            ),
+            Param("mirror", False, help="Mirror the images left to right."),
+            *live_params(),
+            Param(
+                "library_dir",
+                "",
+                help="Folder holding libOpenNI2.so (empty: the system's library folders).",
+            ),
+        ],
+        help="OpenNI2 cameras (openni:// URIs).",
+    )
+)
+
+#: Nominal fields of view (horizontal, vertical) in degrees from PrimeSense's
+#: PS1080 data sheet (Kinect v1, Xtion, Carmine); used only when the driver
+#: reports none (the Dummy device).
+NOMINAL_FOV_DEG = (58.0, 45.0)
+
+DUMMY = "Dummy"
+_USB_PATH = re.compile(r"^([0-9a-fA-F]{4})/([0-9a-fA-F]{4})@(\d+)/(\d+)$")
+_SERIAL_BYTES = 64
+
+
+# ------------------------------------------------------------- the library
+
+
+class _Library:
+    """The OpenNI2 library, initialised once per process."""
+
+    lock = threading.Lock()
+    initialized = False
+    sensors: weakref.WeakSet[OpenNISensor] = weakref.WeakSet()
+
+
+def _modules() -> tuple[Any, Any]:
+    try:
+        from openni import _openni2 as c_api
+        from openni import openni2
+    except ImportError:
+        raise SensorError(
+            "openni:// needs the openni Python package; install it with "
+            "'.venv/bin/pip install openni'."
+        ) from None
+    return openni2, c_api
+
+
+def _library_dirs(configured: str) -> list[Path]:
+    if configured:
+        return [Path(configured)]
+    dirs = [os.environ.get("OPENNI2_REDIST64", ""), os.environ.get("OPENNI2_REDIST", "")]
+    multiarch = sysconfig.get_config_var("MULTIARCH") or ""
+    if multiarch:
+        dirs.append(f"/usr/lib/{multiarch}")
+    dirs += ["/usr/lib", "/usr/local/lib", "/usr/lib64", "/lib"]
+    return [Path(d) for d in dirs if d]
+
+
+def _initialize(configured_dir: str = "") -> Any:
+    """Load and initialise OpenNI2 (once); return the ``openni2`` module."""
+    openni2, c_api = _modules()
+    with _Library.lock:
+        if _Library.initialized and openni2.is_initialized():
+            return openni2
+        dirs = _library_dirs(configured_dir)
+        found = next((d for d in dirs if (d / "libOpenNI2.so").is_file()), None)
+        if found is None:
+            # Only the runtime package (libOpenNI2.so.0, no -dev symlink): load it by name.
+            versioned = next((d for d in dirs if (d / "libOpenNI2.so.0").is_file()), None)
+            if versioned is None:
+                searched = ", ".join(str(d) for d in dirs)
+                raise SensorError(
+                    f"OpenNI2 is not installed (no libOpenNI2.so in {searched}); install the "
+                    "Debian packages libopenni2-0 and libopenni2-dev, or set openni.library_dir."
+                )
+            if not openni2.loaded_dll_directory:
+                c_api.load_dll(str(versioned / "libOpenNI2.so.0"))
+                openni2.loaded_dll_directory = str(versioned)
+            found = versioned
+        try:
+            openni2.initialize(str(found))
+        except Exception as error:  # the binding raises bare Exceptions
+            raise SensorError(
+                f"OpenNI2 in {found} could not be initialised ({error}); reinstall libopenni2-0."
+            ) from None
+        if not _Library.initialized:
+            atexit.unregister(openni2.unload)
+            atexit.register(_shutdown)
+        _Library.initialized = True
+        return openni2
+
+
+def _shutdown() -> None:
+    """Exit hook: close our sensors gracefully (stop, wait, destroy, close).
+
+    OpenNI2 itself is left to the process exit: with every device closed
+    ``oniShutdown`` has nothing to release, and Debian's crashes now and then
+    after the Dummy device streamed.
+    """
+    for sensor in list(_Library.sensors):
+        try:
+            sensor.close()
+        except Exception as error:  # exiting: report, go on
+            log.warning("closing %s at exit failed: %s", sensor.describe(), error)
+
+
+def _text(value: bytes | str) -> str:
+    if isinstance(value, bytes):
+        return value.decode("utf-8", "replace").strip("\x00").strip()
+    return str(value).strip()
+
+
+def _error_text(error: Exception) -> str:
+    args = getattr(error, "args", ())
+    if len(args) >= 2 and args[1]:
+        return _text(args[1])
+    return _text(str(error)) or type(error).__name__
+
+
+def _serial(device: Any, c_api: Any) -> str:
+    prop = c_api.ONI_DEVICE_PROPERTY_SERIAL_NUMBER
+    try:
+        if not device.is_property_supported(prop):
+            return ""
+        return _text(device.get_property(prop, ctypes.c_char * _SERIAL_BYTES).value)
+    except Exception:  # no serial is not an error
+        return ""
+
+
+def _enumerate(openni2: Any) -> list[str]:
+    """OpenNI2's device URIs, less the Dummy device (listed once it has been opened)."""
+    return [u for u in (_text(u) for u in openni2.Device.enumerate_uris()) if u != DUMMY]
+
+
+def attached_devices(library_dir: str = "") -> list[dict[str, str]]:
+    """Cameras OpenNI2 sees: ``uri`` (OpenNI's), ``serial`` (when readable), ``name``.
+
+    The Dummy device is never listed (OpenNI2 opens it on request only).
+    """
+    openni2 = _initialize(library_dir)
+    _, c_api = _modules()
+    out = []
+    for uri in _enumerate(openni2):
+        entry = {"uri": uri, "serial": "", "name": ""}
+        try:
+            device = openni2.Device(uri.encode())
+        except Exception:  # busy or not permitted: list it without serial
+            out.append(entry)
+            continue
+        try:
+            info = device.get_device_info()
+            entry["serial"] = _serial(device, c_api)
+            entry["name"] = f"{_text(info.vendor)} {_text(info.name)}".strip()
+        finally:
+            device.close()
+        out.append(entry)
+    return out
+
+
+# ---------------------------------------------------------------- intrinsics
+
+
+def intrinsics_from_fov(width: int, height: int, hfov: float, vfov: float) -> Intrinsics:
+    """Pinhole intrinsics of a ``width`` x ``height`` image with fields of view in radians.
+
+    The fields of view span the whole image (pixel edges), the principal
+    point is the image centre in the pixel-centre convention.
+    """
+    return Intrinsics(
+        fx=(width / 2.0) / math.tan(hfov / 2.0),
+        fy=(height / 2.0) / math.tan(vfov / 2.0),
+        cx=(width - 1) / 2.0,
+        cy=(height - 1) / 2.0,
+        width=width,
+        height=height,
+    )
+
+
+def _stream_fov(stream: Any) -> tuple[float, float] | None:
+    try:
+        hfov, vfov = stream.get_horizontal_fov(), stream.get_vertical_fov()
+    except Exception:  # ONI_STATUS_NOT_IMPLEMENTED on the Dummy device
+        return None
+    if not (0 < hfov < math.pi and 0 < vfov < math.pi):
+        return None
+    return hfov, vfov
+
+
+# -------------------------------------------------------------- the sensor
+
+
+class _Stream:
+    """One started OpenNI2 stream of a sensor and its pixel conversion."""
+
+    def __init__(self, kind: str, stream: Any, mode: Mode) -> None:
+        self.kind = kind
+        self.stream = stream
+        self.mode = mode
+        self.frames: collections.deque[tuple[int, np.ndarray]] = collections.deque(maxlen=4)
+
+
+class OpenNISensor(LiveSensor):
+    """One OpenNI2 camera (see the module docstring)."""
+
+    backend = "OpenNI2"
+
+    def __init__(
+        self,
+        target: str = "",
+        params: Params | None = None,
+        sensor_id: str | None = None,
+        uri: str = "",
+    ) -> None:
+        params = params if params is not None else OPENNI_PARAMS.create()
+        super().__init__(target, params, sensor_id, uri or f"openni://{target}")
+        self.device: Any = None
+        self.serial = ""
+        self.model = ""
+        self.intrinsics_source = ""
+        self.registered = False
+        self.synced = False
+        self.modes: dict[str, Mode] = {}
+        self._streams: dict[str, _Stream] = {}
+        self._depth_scale = 0.001
+        self._intrinsics: Intrinsics | None = None
+        self._color_intrinsics: Intrinsics | None = None
+        self._last_index: int | None = None
+        self._seq = 0
+        self._id: str | None = None
+        self._started_at: float | None = None
+
+    def describe(self) -> str:
+        return f"OpenNI2 camera '{self.target or 'first attached'}'"
+
+    @property
+    def sensor_id(self) -> str:
+        """The id frames carry: the one asked for, else from the serial (fixed at first open)."""
+        if self.requested_id:
+            return self.requested_id
+        if self._id is None:
+            name = self.serial or self.target or "camera"
+            return "openni-" + re.sub(r"[^A-Za-z0-9_.-]", "-", name).strip("-")[:56]
+        return self._id
+
+    # ------------------------------------------------------------ device
+    def _resolve(self, openni2: Any, c_api: Any) -> bytes:
+        target = self.target
+        if target.lower() == DUMMY.lower():
+            return DUMMY.encode()
+        uris = _enumerate(openni2)
+        if not target:
+            if uris:
+                return uris[0].encode()
+            raise SensorError(self._nothing_attached(openni2))
+        if target in uris:
+            return target.encode()
+        match = _USB_PATH.match(target)
+        if match:
+            # A replugged camera gets a new address: take the one camera with these ids.
+            ids = f"{match.group(1)}/{match.group(2)}@".lower()
+            same = [u for u in uris if u.lower().startswith(ids)]
+            if len(same) == 1:
+                return same[0].encode()
+        for uri in uris:
+            try:
+                device = openni2.Device(uri.encode())
+            except Exception:  # busy: cannot be the one we may open
+                continue
+            try:
+                if _serial(device, c_api) == target:
+                    return uri.encode()
+            finally:
+                device.close()
+        raise SensorError(self._nothing_attached(openni2))
+
+    def _nothing_attached(self, openni2: Any) -> str:
+        from optrack.sensors.uri import attached_summary
+
+        what = (
+            f"no OpenNI2 camera with serial or URI '{self.target}'"
+            if self.target
+            else ("no OpenNI2 camera")
+        )
+        return (
+            f"{what} is attached ({attached_summary()}); check its cable, or use a URI that "
+            "'optrack sensors' lists (openni://Dummy is OpenNI2's test device)."
+        )
+
+    def _open_failure(self, uri: bytes, error: Exception) -> str:
+        from optrack.sensors import usb
+
+        match = _USB_PATH.match(_text(uri))
+        if match:
+            try:
+                cameras = usb.list_cameras()
+            except SensorError:
+                cameras = []
+            for camera in cameras:
+                if (
+                    camera.access == "denied"
+                    and camera.bus == int(match.group(3))
+                    and camera.address == int(match.group(4))
+                ):
+                    return usb.permission_message(camera)
+        return (
+            f"OpenNI2 could not open camera '{_text(uri)}' ({_error_text(error)}); check that no "
+            "other program is using it, or unplug and replug it."
+        )
+
+    def _open_device(self) -> SensorInfo:
+        openni2 = _initialize(str(self.params.library_dir))
+        _, c_api = _modules()
+        uri = self._resolve(openni2, c_api)
+        try:
+            device = openni2.Device(uri)
+        except Exception as error:  # OpenNIError and friends
+            raise SensorError(self._open_failure(uri, error)) from None
+        self.device = device
+        try:
+            return self._configure(openni2, c_api, device, uri)
+        except SensorError:
+            self._close_device()
+            raise
+        except Exception as error:  # OpenNIError: the device went away meanwhile
+            self._close_device()
+            raise SensorError(
+                f"{self.describe()} failed while starting ({_error_text(error)}); unplug and "
+                "replug it, then try again."
+            ) from None
+        except BaseException:
+            self._close_device()
+            raise
+
+    def _configure(self, openni2: Any, c_api: Any, device: Any, uri: bytes) -> SensorInfo:
+        from optrack.sensors.usb import lookup
+
+        p = self.params
+        info = device.get_device_info()
+        self.serial = _serial(device, c_api) or self.serial
+        if self._id is None:
+            self._id = self.sensor_id
+        self.modes = {}
+        known = lookup(int(info.usbVendorId), int(info.usbProductId))
+        vendor_name = f"{_text(info.vendor)} {_text(info.name)}".strip()
+        if known is not None:
+            self.model = known.model
+        elif uri == DUMMY.encode():
+            self.model = f"OpenNI2 Dummy device ({vendor_name or 'test pattern'})"
+        else:
+            self.model = vendor_name or "OpenNI2 device"
+        if not device.has_sensor(openni2.SENSOR_DEPTH):
+            raise SensorError(f"{self.describe()} has no depth sensor; it cannot be used here.")
+
+        depth_formats = (
+            openni2.PIXEL_FORMAT_DEPTH_1_MM,
+            openni2.PIXEL_FORMAT_DEPTH_100_UM,
+        )
+        color_formats = (
+            openni2.PIXEL_FORMAT_RGB888,
+            openni2.PIXEL_FORMAT_YUV422,
+            openni2.PIXEL_FORMAT_YUYV,
+            openni2.PIXEL_FORMAT_JPEG,
+        )
+        ir_formats = (
+            openni2.PIXEL_FORMAT_GRAY16,
+            openni2.PIXEL_FORMAT_GRAY8,
+            openni2.PIXEL_FORMAT_RGB888,
+        )
+        wanted = (int(p.width), int(p.height), float(p.fps))
+        self._streams = {}
+        self._add_stream(openni2, device, "depth", openni2.SENSOR_DEPTH, depth_formats, wanted)
+        if p.color and device.has_sensor(openni2.SENSOR_COLOR):
+            self._add_stream(openni2, device, "color", openni2.SENSOR_COLOR, color_formats, wanted)
+        if p.infrared:
+            if device.has_sensor(openni2.SENSOR_IR):
+                self._add_stream(openni2, device, "infrared", openni2.SENSOR_IR, ir_formats, wanted)
+            else:
+                log.warning("%s has no infrared sensor; recording without it.", self.describe())
+        depth_mode = self.modes["depth"]
+        self._depth_scale = (
+            0.0001 if int(depth_mode.format) == int(openni2.PIXEL_FORMAT_DEPTH_100_UM) else 0.001
+        )
+        self.clock.period = 1.0 / max(depth_mode.fps, 1.0)
+
+        self.registered = False
+        if "color" in self._streams and p.registration:
+            mode = openni2.IMAGE_REGISTRATION_DEPTH_TO_COLOR
+            try:
+                if device.is_image_registration_mode_supported(mode):
+                    device.set_image_registration_mode(mode)
+                    self.registered = True
+            except Exception as error:  # unsupported: unregistered colour
+                log.warning("%s: registration refused (%s).", self.describe(), error)
+        self.synced = False
+        if "color" in self._streams and p.sync:
+            try:
+                device.set_depth_color_sync_enabled(True)
+                self.synced = True
+            except Exception:  # not supported: frames are paired by time
+                self.synced = False
+        for stream in self._streams.values():
+            if stream.stream.is_property_supported(c_api.ONI_STREAM_PROPERTY_MIRRORING):
+                try:
+                    stream.stream.set_mirroring_enabled(bool(p.mirror))
+                except Exception:  # mirroring is cosmetic
+                    pass
+        for kind, stream in self._streams.items():
+            try:
+                stream.stream.start()
+            except Exception as error:
+                hint = (
+                    " (this camera cannot send infrared and colour together: set color=false)"
+                    if kind in ("infrared", "color") and "infrared" in self._streams
+                    else ""
+                )
+                raise SensorError(
+                    f"{self.describe()} refused to start its {kind} stream "
+                    f"({_error_text(error)}){hint}."
+                ) from None
+        self._started_at = time.monotonic()
+        _Library.sensors.add(self)
+        self._last_index = None
+        self._intrinsics, self._color_intrinsics = self._compute_intrinsics()
+        return SensorInfo(
+            id=self.sensor_id,
+            intrinsics=self._intrinsics,
+            model=self.model,
+            uri=self.uri,
+            depth_scale=self._depth_scale,
+            color_intrinsics=self._color_intrinsics,
+            fps=float(depth_mode.fps),
+            streams=list(self._streams),
+        )
+
+    def _add_stream(
+        self,
+        openni2: Any,
+        device: Any,
+        kind: str,
+        sensor_type: Any,
+        formats: tuple[Any, ...],
+        wanted: tuple[int, int, float],
+    ) -> None:
+        sensor_info = device.get_sensor_info(sensor_type)
+        modes = [
+            Mode(m.resolutionX, m.resolutionY, float(m.fps), int(m.pixelFormat))
+            for m in (sensor_info.videoModes if sensor_info else [])
+        ]
+        if kind != "depth" and "depth" in self.modes:
+            # Colour and infrared at the depth image's size and rate where possible.
+            depth = self.modes["depth"]
+            wanted = (depth.width, depth.height, depth.fps)
+        mode = nearest_mode(modes, *wanted, formats=[int(f) for f in formats])
+        if mode is None:
+            offered = ", ".join(sorted({str(m) for m in modes})) or "none"
+            if kind == "depth":
+                raise SensorError(
+                    f"{self.describe()} offers no depth mode in millimetres (it offers: {offered})."
+                )
+            log.warning("%s: no usable %s mode (offers %s).", self.describe(), kind, offered)
+            return
+        if (mode.width, mode.height, mode.fps) != wanted:
+            log.info("%s: %s mode %s (wanted %dx%d@%g).", self.describe(), kind, mode, *wanted)
+        try:
+            stream = device.create_stream(sensor_type)
+        except Exception as error:
+            raise SensorError(
+                f"{self.describe()} could not create its {kind} stream ({_error_text(error)})."
+            ) from None
+        try:
+            current = stream.get_video_mode()
+            if (
+                current.resolutionX,
+                current.resolutionY,
+                float(current.fps),
+                int(current.pixelFormat),
+            ) != (mode.width, mode.height, mode.fps, mode.format):
+                stream.set_video_mode(
+                    openni2.VideoMode(
+                        resolutionX=mode.width,
+                        resolutionY=mode.height,
+                        fps=int(mode.fps),
+                        pixelFormat=mode.format,
+                    )
+                )
+        except Exception as error:
+            stream.close()
+            raise SensorError(
+                f"{self.describe()} refused the {kind} mode {mode} ({_error_text(error)})."
+            ) from None
+        self.modes[kind] = mode
+        self._streams[kind] = _Stream(kind, stream, mode)
+
+    def _compute_intrinsics(self) -> tuple[Intrinsics, Intrinsics | None]:
+        nominal = tuple(math.radians(a) for a in NOMINAL_FOV_DEG)
+        depth = self._streams["depth"]
+        color = self._streams.get("color")
+        depth_fov = _stream_fov(depth.stream)
+        color_fov = _stream_fov(color.stream) if color else None
+        reported = depth_fov is not None and (color is None or color_fov is not None)
+        self.intrinsics_source = "device" if reported else "nominal"
+        if not reported:
+            log.info(
+                "%s reports no field of view; using the nominal %gx%g degrees.",
+                self.describe(),
+                *NOMINAL_FOV_DEG,
+            )
+        d = depth.mode
+        if self.registered and color is not None:
+            # Depth is re-projected into the colour camera: both share its intrinsics.
+            fov = color_fov or nominal
+            color_k = intrinsics_from_fov(color.mode.width, color.mode.height, *fov)
+            depth_k = intrinsics_from_fov(d.width, d.height, *fov)
+            same_size = (color.mode.width, color.mode.height) == (d.width, d.height)
+            return depth_k, None if same_size else color_k
+        depth_k = intrinsics_from_fov(d.width, d.height, *(depth_fov or nominal))
+        if color is None:
+            return depth_k, None
+        color_k = intrinsics_from_fov(color.mode.width, color.mode.height, *(color_fov or nominal))
+        return depth_k, color_k
+
+    def _close_device(self) -> None:
+        streams = list(self._streams.values())
+        self._streams = {}
+        fps = max(min((s.mode.fps for s in streams), default=30.0), 1.0)
+        if streams and self._started_at is not None:
+            # Stopping a stream within a frame of starting it crashes the Dummy driver's thread.
+            time.sleep(max(0.0, self._started_at + 3.0 / fps - time.monotonic()))
+        self._started_at = None
+        for stream in streams:
+            try:
+                stream.stream.stop()
+            except Exception:  # a pulled-out device fails to stop
+                pass
+        if streams:
+            # The driver's frame thread may still touch a stopped stream for up to a frame.
+            time.sleep(2.0 / fps)
+        for stream in streams:
+            try:
+                stream.stream.close()
+            except Exception:
+                pass
+        if self.device is not None:
+            try:
+                self.device.close()
+            except Exception:
+                pass
+            self.device = None
+        _Library.sensors.discard(self)
+
+    # ------------------------------------------------------------ frames
+    def _grab(self, timeout: float) -> RGBDFrame | None:
+        openni2, _ = _modules()
+        deadline = time.monotonic() + timeout
+        by_handle = {id(s.stream): s for s in self._streams.values()}
+        handles = [s.stream for s in self._streams.values()]
+        if not handles:
+            raise DeviceLost("the device is closed")
+        while True:
+            frame = self._pair()
+            if frame is not None:
+                return frame
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return None
+            try:
+                ready = openni2.wait_for_any_stream(handles, remaining)
+                if ready is None:
+                    return None
+                stream = by_handle[id(ready)]
+                self._take(stream)
+            except DeviceLost:
+                raise
+            except Exception as error:  # OpenNIError: the device failed
+                raise DeviceLost(_error_text(error)) from None
+
+    def _take(self, stream: _Stream) -> None:
+        oni_frame = stream.stream.read_frame()
+        try:
+            timestamp = int(oni_frame.timestamp)
+            index = int(oni_frame.frameIndex)
+            image = self._convert(stream, oni_frame)
+        finally:
+            oni_frame.close()
+        if stream.kind == "depth":
+            if self._last_index is not None and index > self._last_index + 1:
+                self.dropped += index - self._last_index - 1
+            self._last_index = index
+        stream.frames.append((timestamp, image))
+
+    def _convert(self, stream: _Stream, oni_frame: Any) -> np.ndarray:
+        import cv2
+        from openni import openni2
+
+        width, height, stride = oni_frame.width, oni_frame.height, oni_frame.stride
+        fmt = int(oni_frame.videoMode.pixelFormat)
+        raw = np.ctypeslib.as_array(
+            (ctypes.c_uint8 * int(oni_frame.dataSize)).from_address(oni_frame.data)
+        )
+        if fmt in (
+            int(openni2.PIXEL_FORMAT_DEPTH_1_MM),
+            int(openni2.PIXEL_FORMAT_DEPTH_100_UM),
+            int(openni2.PIXEL_FORMAT_GRAY16),
+        ):
+            rows = raw[: height * stride].reshape(height, stride)[:, : width * 2]
+            return rows.copy().view(np.uint16)
+        if fmt == int(openni2.PIXEL_FORMAT_GRAY8):
+            return raw[: height * stride].reshape(height, stride)[:, :width].copy()
+        if fmt == int(openni2.PIXEL_FORMAT_RGB888):
+            rgb = raw[: height * stride].reshape(height, stride)[:, : width * 3]
+            rgb = rgb.reshape(height, width, 3)
+            return rgb[:, :, 0].copy() if stream.kind == "infrared" else rgb.copy()
+        if fmt in (int(openni2.PIXEL_FORMAT_YUV422), int(openni2.PIXEL_FORMAT_YUYV)):
+            packed = raw[: height * stride].reshape(height, stride)[:, : width * 2]
+            packed = np.ascontiguousarray(packed).reshape(height, width, 2)
+            code = (
+                cv2.COLOR_YUV2RGB_UYVY
+                if fmt == int(openni2.PIXEL_FORMAT_YUV422)
+                else cv2.COLOR_YUV2RGB_YUYV
+            )
+            return cv2.cvtColor(packed, code)
+        if fmt == int(openni2.PIXEL_FORMAT_JPEG):
+            bgr = cv2.imdecode(raw.copy(), cv2.IMREAD_COLOR)
+            if bgr is None:
+                raise DeviceLost("the camera sent a damaged JPEG frame")
+            return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        raise DeviceLost(f"the camera sent pixel format {fmt}, which optrack cannot read")
+
+    def _pair(self) -> RGBDFrame | None:
+        """The oldest depth frame with its colour and infrared, once they can be matched.
+
+        A companion frame matches when its device time is within half a
+        frame period; while one may still come the depth frame waits (at
+        most three frames), then goes with the newest companion available.
+        """
+        depth = self._streams.get("depth")
+        if depth is None or not depth.frames:
+            return None
+        t_depth, depth_image = depth.frames[0]
+        tolerance_us = 0.5e6 / max(depth.mode.fps, 1.0)
+        companions: dict[str, np.ndarray | None] = {}
+        for kind in ("color", "infrared"):
+            stream = self._streams.get(kind)
+            if stream is None:
+                continue
+            match = min(
+                (f for f in stream.frames if abs(f[0] - t_depth) <= tolerance_us),
+                key=lambda f: abs(f[0] - t_depth),
+                default=None,
+            )
+            if match is None:
+                may_come = not stream.frames or stream.frames[-1][0] < t_depth + tolerance_us
+                if may_come and len(depth.frames) < 3:
+                    return None
+                match = stream.frames[-1] if stream.frames else None
+            if match is not None:
+                while stream.frames and stream.frames[0][0] < match[0]:
+                    stream.frames.popleft()
+            companions[kind] = match[1] if match is not None else None
+        depth.frames.popleft()
+        return self._frame(t_depth, depth_image, companions)
+
+    def _frame(
+        self, t_depth_us: int, depth: np.ndarray, companions: dict[str, np.ndarray | None]
+    ) -> RGBDFrame:
+        import cv2
+
+        h, w = depth.shape
+        infrared = companions.get("infrared")
+        if infrared is not None and infrared.shape != (h, w):
+            infrared = cv2.resize(infrared, (w, h), interpolation=cv2.INTER_NEAREST)
+        seq = self._seq
+        self._seq += 1
+        assert self._intrinsics is not None
+        return RGBDFrame(
+            depth=depth,
+            intrinsics=self._intrinsics,
+            sensor_id=self.sensor_id,
+            timestamp=self.clock.stamp(t_depth_us * 1e-6),
+            depth_scale=self._depth_scale,
+            color=companions.get("color"),
+            infrared=infrared,
+            color_intrinsics=self._color_intrinsics,
+            seq=seq,
+        )

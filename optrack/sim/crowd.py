@@ -1,0 +1,675 @@
+"""People moving through the venue: behaviours and the social force model.
+
+Each person has a behaviour that picks where to go (wander to random goals
+with pauses, follow a route, stand, walk with a group, enter through a door
+and later leave through it, or carry the calibration board). Collision
+avoidance is the social force model of D. Helbing and P. Molnar, "Social
+force model for pedestrian dynamics", Phys. Rev. E 51 (1995): a driving
+term relaxes the velocity towards the desired one in ``relax_time``, and
+people and obstacles repel with exponentially decaying forces; people react
+more to what is ahead of them (weight ``lambda + (1 - lambda)(1 + cos phi)/2``).
+
+The state advances in fixed time steps from a seeded generator, so the same
+seed gives the same motion in every process that simulates the venue.
+"""
+
+from __future__ import annotations
+
+import colorsys
+import dataclasses
+import math
+
+import numpy as np
+
+from optrack.params import Param, Params, Schema, register
+from optrack.sim.body import BODY_PARAMS, MATERIALS_PER_PERSON, BodyPose
+from optrack.sim.materials import Material
+from optrack.sim.scenario import PeopleSpec
+from optrack.sim.venue import Venue
+
+__all__ = ["CROWD_PARAMS", "Behaviour", "Crowd", "CrowdState", "Person"]
+
+CROWD_PARAMS = register(
+    Schema(
+        "sim_crowd",
+        [
+            Param(
+                "time_step", 0.02, 0.002, 0.1, 0.002, "s", "Fixed step of the people simulation."
+            ),
+            Param("adult_height_mean", 1.72, 1.5, 2.0, 0.01, "m", "Mean adult height."),
+            Param("adult_height_std", 0.09, 0.0, 0.3, 0.01, "m", "Spread of adult heights."),
+            Param("adult_height_min", 1.5, 1.0, 2.2, 0.01, "m", "Shortest adult."),
+            Param("adult_height_max", 2.0, 1.0, 2.3, 0.01, "m", "Tallest adult."),
+            Param("child_height_min", 0.8, 0.5, 1.5, 0.01, "m", "Shortest child."),
+            Param("child_height_max", 1.4, 0.5, 1.6, 0.01, "m", "Tallest child."),
+            Param("speed_min", 0.8, 0.1, 3.0, 0.05, "m/s", "Slowest preferred walking speed."),
+            Param("speed_max", 1.5, 0.1, 3.0, 0.05, "m/s", "Fastest preferred walking speed."),
+            Param(
+                "relax_time",
+                0.5,
+                0.05,
+                5.0,
+                0.05,
+                "s",
+                "Social force: time to reach the desired velocity.",
+            ),
+            Param(
+                "people_push",
+                2.1,
+                0.0,
+                50.0,
+                0.1,
+                "m/s2",
+                "Social force: repulsion between people.",
+            ),
+            Param(
+                "people_range",
+                0.3,
+                0.01,
+                2.0,
+                0.01,
+                "m",
+                "Social force: decay length between people.",
+            ),
+            Param(
+                "obstacle_push",
+                10.0,
+                0.0,
+                100.0,
+                0.5,
+                "m/s2",
+                "Social force: repulsion from walls and furniture.",
+            ),
+            Param(
+                "obstacle_range",
+                0.2,
+                0.01,
+                2.0,
+                0.01,
+                "m",
+                "Social force: decay length from obstacles.",
+            ),
+            Param(
+                "anisotropy",
+                0.3,
+                0.0,
+                1.0,
+                0.05,
+                "",
+                "Social force: weight of people behind (0 ignores them).",
+            ),
+            Param("body_radius", 0.25, 0.1, 0.5, 0.01, "m", "Radius of a walker's footprint."),
+            Param(
+                "max_speed_factor",
+                1.3,
+                1.0,
+                3.0,
+                0.05,
+                "",
+                "Top speed as a multiple of the preferred speed.",
+            ),
+            Param("turn_rate", 3.0, 0.1, 20.0, 0.1, "rad/s", "How fast a walker turns its body."),
+            Param(
+                "arrive_radius", 0.35, 0.05, 2.0, 0.05, "m", "A goal closer than this is reached."
+            ),
+            Param(
+                "slow_radius",
+                0.8,
+                0.05,
+                5.0,
+                0.05,
+                "m",
+                "Walkers slow down within this distance of a stop.",
+            ),
+            Param(
+                "goal_clearance",
+                0.6,
+                0.2,
+                3.0,
+                0.05,
+                "m",
+                "Free space around random goals and start points.",
+            ),
+            Param(
+                "start_spacing", 0.9, 0.3, 3.0, 0.05, "m", "Minimum distance between start points."
+            ),
+            Param(
+                "pause_probability", 0.35, 0.0, 1.0, 0.05, "", "Chance a wanderer pauses at a goal."
+            ),
+            Param("pause_min", 1.0, 0.0, 60.0, 0.5, "s", "Shortest pause."),
+            Param("pause_max", 5.0, 0.0, 120.0, 0.5, "s", "Longest pause."),
+            Param(
+                "stuck_seconds",
+                4.0,
+                0.5,
+                60.0,
+                0.5,
+                "s",
+                "A walker that gains nothing for this long picks a new goal.",
+            ),
+            Param(
+                "group_spacing", 0.75, 0.3, 3.0, 0.05, "m", "Distance between members of a group."
+            ),
+            Param(
+                "enter_window",
+                0.3,
+                0.0,
+                1.0,
+                0.05,
+                "",
+                "People enter within this fraction of the run.",
+            ),
+            Param(
+                "leave_after",
+                0.6,
+                0.0,
+                1.0,
+                0.05,
+                "",
+                "People start leaving after this fraction of the run.",
+            ),
+            Param(
+                "clothes_texture",
+                0.15,
+                0.0,
+                1.0,
+                0.01,
+                "",
+                "Relative albedo variation of clothes (stereo texture).",
+            ),
+        ],
+        help="How the simulated people move and look.",
+    )
+)
+
+SKIN_TONES = (
+    (0.93, 0.76, 0.64),
+    (0.85, 0.64, 0.5),
+    (0.72, 0.52, 0.38),
+    (0.55, 0.37, 0.25),
+    (0.36, 0.24, 0.17),
+)
+HAIR_COLORS = (
+    (0.1, 0.08, 0.06),
+    (0.3, 0.2, 0.12),
+    (0.55, 0.4, 0.25),
+    (0.8, 0.7, 0.45),
+    (0.6, 0.6, 0.6),
+)
+TROUSER_COLORS = (
+    (0.15, 0.2, 0.35),
+    (0.1, 0.1, 0.1),
+    (0.4, 0.4, 0.42),
+    (0.7, 0.62, 0.48),
+    (0.25, 0.3, 0.2),
+)
+SHOE_COLOR = (0.12, 0.11, 0.1)
+SKIN_INFRARED, HAIR_INFRARED, SHOE_INFRARED = 0.55, 0.25, 0.2
+
+
+@dataclasses.dataclass
+class Person:
+    id: int
+    height: float
+    speed: float
+    materials: list[Material]
+    behaviour: Behaviour
+    child: bool = False
+
+
+@dataclasses.dataclass
+class CrowdState:
+    """The present people at one instant (arrays over present people, in id order)."""
+
+    t: float
+    ids: np.ndarray
+    index: np.ndarray  # index of each present person in Crowd.people
+    pose: BodyPose
+
+
+class Behaviour:
+    """Decides where one person goes. ``goal`` returns (goal xy or None, speed m/s);
+    None means stand where you are. Behaviours may face a direction and hold things."""
+
+    def start(self, crowd: Crowd, i: int) -> np.ndarray:
+        """Start position of person i (people before i are already placed)."""
+        return crowd.random_free_point(crowd.params.start_spacing, crowd.pos[:i])
+
+    def present(self, crowd: Crowd, i: int, t: float) -> bool:
+        return True
+
+    def goal(self, crowd: Crowd, i: int, t: float) -> tuple[np.ndarray | None, float]:
+        return None, 0.0
+
+    def facing(self, crowd: Crowd, i: int, t: float) -> float | None:
+        """A heading to turn to while standing (None: keep the current one)."""
+        return None
+
+    def wrists(self, crowd: Crowd, i: int, t: float) -> np.ndarray | None:
+        """(2, 3) world points the wrists should reach, or None for a free gait."""
+        return None
+
+
+class Wander(Behaviour):
+    """Random goals in the area, with pauses; picks a new goal when stuck."""
+
+    def __init__(self) -> None:
+        self.target: np.ndarray | None = None
+        self.pause_until = -1.0
+        self.best = math.inf
+        self.best_t = 0.0
+
+    def goal(self, crowd: Crowd, i: int, t: float) -> tuple[np.ndarray | None, float]:
+        p = crowd.params
+        if t < self.pause_until:
+            return None, 0.0
+        position = crowd.pos[i]
+        if self.target is None:
+            self._new(crowd, t)
+        dist = float(np.linalg.norm(self.target - position))
+        if dist < p.arrive_radius:
+            if crowd.rng.random() < p.pause_probability:
+                self.pause_until = t + crowd.rng.uniform(p.pause_min, p.pause_max)
+            self._new(crowd, t)
+            return None, 0.0
+        if dist < self.best - 0.2:
+            self.best, self.best_t = dist, t
+        elif t - self.best_t > p.stuck_seconds:
+            self._new(crowd, t)
+        return self.target, crowd.people[i].speed
+
+    def _new(self, crowd: Crowd, t: float) -> None:
+        self.target = crowd.random_free_point()
+        self.best, self.best_t = math.inf, t
+
+
+class Route(Behaviour):
+    """Walk through waypoints in a loop (or back and forth)."""
+
+    def __init__(self, points: np.ndarray, start_at: int = 0) -> None:
+        self.points = np.asarray(points, dtype=np.float64)
+        self.next = (start_at + 1) % len(self.points)
+        self.start_at = start_at
+        self.best = math.inf
+        self.best_t = 0.0
+
+    def start(self, crowd: Crowd, i: int) -> np.ndarray:
+        return self.points[self.start_at].copy()
+
+    def goal(self, crowd: Crowd, i: int, t: float) -> tuple[np.ndarray | None, float]:
+        p = crowd.params
+        target = self.points[self.next]
+        dist = float(np.linalg.norm(target - crowd.pos[i]))
+        stuck = dist >= self.best - 0.2 and t - self.best_t > p.stuck_seconds
+        if dist < self.best - 0.2:
+            self.best, self.best_t = dist, t
+        if dist < p.arrive_radius or stuck:
+            self.next = (self.next + 1) % len(self.points)
+            self.best, self.best_t = math.inf, t
+            target = self.points[self.next]
+        return target, crowd.people[i].speed
+
+
+class Stand(Behaviour):
+    """Stand at a spot, facing a direction (people standing still, talking)."""
+
+    def __init__(self, spot: np.ndarray, heading: float) -> None:
+        self.spot = np.asarray(spot, dtype=np.float64)
+        self.heading = heading
+
+    def start(self, crowd: Crowd, i: int) -> np.ndarray:
+        return self.spot.copy()
+
+    def goal(self, crowd: Crowd, i: int, t: float) -> tuple[np.ndarray | None, float]:
+        if np.linalg.norm(crowd.pos[i] - self.spot) > crowd.params.arrive_radius:
+            return self.spot, crowd.people[i].speed * 0.5
+        return None, 0.0
+
+    def facing(self, crowd: Crowd, i: int, t: float) -> float | None:
+        return self.heading
+
+
+class Follow(Behaviour):
+    """Walk beside a group's leader, at an offset in the leader's frame."""
+
+    def __init__(self, leader: int, offset: np.ndarray) -> None:
+        self.leader = leader
+        self.offset = np.asarray(offset, dtype=np.float64)
+
+    def start(self, crowd: Crowd, i: int) -> np.ndarray:
+        point = crowd.pos[self.leader] + self.offset
+        return (
+            point
+            if crowd.venue.is_free(point[None], crowd.params.body_radius)[0]
+            else crowd.pos[self.leader] + 0.5 * self.offset
+        )
+
+    def present(self, crowd: Crowd, i: int, t: float) -> bool:
+        return bool(crowd.present[self.leader])
+
+    def goal(self, crowd: Crowd, i: int, t: float) -> tuple[np.ndarray | None, float]:
+        heading = crowd.heading[self.leader]
+        c, s = math.cos(heading), math.sin(heading)
+        target = crowd.pos[self.leader] + np.array(
+            [c * self.offset[0] - s * self.offset[1], s * self.offset[0] + c * self.offset[1]]
+        )
+        dist = float(np.linalg.norm(target - crowd.pos[i]))
+        leader_speed = float(np.linalg.norm(crowd.vel[self.leader]))
+        if dist < crowd.params.arrive_radius * 0.5 and leader_speed < 0.2:
+            return None, 0.0
+        speed = max(leader_speed, crowd.people[i].speed * min(1.0, dist))
+        return target, speed
+
+    def facing(self, crowd: Crowd, i: int, t: float) -> float | None:
+        return float(crowd.heading[self.leader])
+
+
+class EnterLeave(Behaviour):
+    """Come in through a door at ``enter``, wander, leave through a door after ``leave``."""
+
+    def __init__(self, door: np.ndarray, enter: float, leave: float) -> None:
+        self.door = np.asarray(door, dtype=np.float64)
+        self.enter, self.leave = enter, leave
+        self.gone = False
+        self.wander = Wander()
+
+    def start(self, crowd: Crowd, i: int) -> np.ndarray:
+        return self.door.copy()
+
+    def present(self, crowd: Crowd, i: int, t: float) -> bool:
+        return self.enter <= t and not self.gone
+
+    def goal(self, crowd: Crowd, i: int, t: float) -> tuple[np.ndarray | None, float]:
+        if t < self.leave:
+            return self.wander.goal(crowd, i, t)
+        if np.linalg.norm(crowd.pos[i] - self.door) < crowd.params.arrive_radius:
+            self.gone = True
+            return None, 0.0
+        return self.door, crowd.people[i].speed
+
+
+# ------------------------------------------------------------------ the crowd
+
+
+class Crowd:
+    """Everyone in the venue, stepped with the social force model."""
+
+    def __init__(
+        self,
+        venue: Venue,
+        rng: np.random.Generator,
+        params: Params | None = None,
+        body_params: Params | None = None,
+    ) -> None:
+        self.venue = venue
+        self.rng = rng
+        self.params = params if params is not None else CROWD_PARAMS.create()
+        self.body_params = body_params if body_params is not None else BODY_PARAMS.create()
+        self.people: list[Person] = []
+        self.area = np.array([-venue.half[0], -venue.half[1], venue.half[0], venue.half[1]])
+        self.t = 0.0
+        self.duration = 0.0
+        self._started = False
+
+    # ------------------------------------------------------------ building
+    def add(self, behaviour: Behaviour, *, child: bool = False, height: float | None = None) -> int:
+        """Add a person; returns their index (also their id)."""
+        p = self.params
+        if height is None:
+            if child:
+                height = self.rng.uniform(p.child_height_min, p.child_height_max)
+            else:
+                height = float(
+                    np.clip(
+                        self.rng.normal(p.adult_height_mean, p.adult_height_std),
+                        p.adult_height_min,
+                        p.adult_height_max,
+                    )
+                )
+        speed = self.rng.uniform(p.speed_min, p.speed_max) * (0.85 if child else 1.0)
+        index = len(self.people)
+        self.people.append(
+            Person(index, float(height), float(speed), self._clothes(index), behaviour, child)
+        )
+        return index
+
+    def _clothes(self, index: int) -> list[Material]:
+        rng, texture = self.rng, float(self.params.clothes_texture)
+        shirt = colorsys.hsv_to_rgb(rng.random(), rng.uniform(0.3, 0.9), rng.uniform(0.25, 0.95))
+        trousers = np.clip(
+            np.array(TROUSER_COLORS[rng.integers(len(TROUSER_COLORS))]) * rng.uniform(0.8, 1.2),
+            0,
+            1,
+        )
+        skin = SKIN_TONES[rng.integers(len(SKIN_TONES))]
+        hair = HAIR_COLORS[rng.integers(len(HAIR_COLORS))]
+        materials = [
+            Material(f"skin{index}", skin, SKIN_INFRARED, texture / 3),
+            Material(f"hair{index}", hair, HAIR_INFRARED, texture),
+            Material(f"shirt{index}", tuple(shirt), float(rng.uniform(0.25, 0.85)), texture),
+            Material(f"trousers{index}", tuple(trousers), float(rng.uniform(0.2, 0.7)), texture),
+            Material(f"shoes{index}", SHOE_COLOR, SHOE_INFRARED, texture),
+        ]
+        assert len(materials) == MATERIALS_PER_PERSON
+        return materials
+
+    def populate(self, spec: PeopleSpec, count: int, duration: float) -> None:
+        """Add ``count`` people with the behaviours a scenario asks for, in the order:
+        routes, standing, groups, crossing pairs, enter-and-leave, wanderers."""
+        p = self.params
+        self.duration = duration
+        if spec.area is not None:
+            self.area = np.asarray(spec.area, dtype=np.float64)
+        rng = self.rng
+        base = len(self.people)  # people added before (the board's operator)
+
+        def added() -> int:
+            return len(self.people) - base
+
+        left = count
+
+        def child() -> bool:
+            return bool(rng.random() < spec.children)
+
+        for route in spec.routes[:left]:
+            self.add(Route(np.asarray(route)), child=child())
+        left = count - added()
+        for _ in range(min(spec.standing, left)):
+            self.add(Stand(self.random_free_point(), rng.uniform(-math.pi, math.pi)), child=child())
+        left = count - added()
+        for size in spec.groups:
+            if left < 2:
+                break
+            size = min(size, left)
+            leader = self.add(Wander(), child=child())
+            for k in range(1, size):
+                side = 1 if k % 2 else -1
+                offset = np.array(
+                    [-(k // 2) * p.group_spacing, side * p.group_spacing * (1 + k // 2) * 0.7]
+                )
+                self.add(Follow(leader, offset), child=child())
+            left = count - added()
+        for _ in range(spec.crossing):
+            if left < 2:
+                break
+            center = np.array(
+                [(self.area[0] + self.area[2]) / 2, (self.area[1] + self.area[3]) / 2]
+            )
+            reach = 0.4 * min(self.area[2] - self.area[0], self.area[3] - self.area[1])
+            angle = rng.uniform(0, math.pi)
+            for turn in (0.0, math.pi / 2 + rng.uniform(-0.6, 0.6)):
+                d = reach * np.array([math.cos(angle + turn), math.sin(angle + turn)])
+                self.add(Route(np.array([center + d, center - d])), child=child())
+            left = count - added()
+        doors = self.venue.doors
+        for k in range(min(spec.enter_leave, left)):
+            door = doors[k % len(doors)]
+            enter = rng.uniform(0.0, p.enter_window * duration)
+            leave = rng.uniform(p.leave_after, 0.95) * duration
+            self.add(EnterLeave(door, enter, max(leave, enter + 1.0)), child=child())
+        left = count - added()
+        for _ in range(left):
+            self.add(Wander(), child=child())
+
+    def random_free_point(
+        self, spacing: float = 0.0, others: np.ndarray | None = None
+    ) -> np.ndarray:
+        """A random floor point in the area with free space around it and, when
+        ``others`` are given, ``spacing`` metres from each of them (the best of a
+        few hundred tries when no point qualifies)."""
+        p = self.params
+        x0, y0, x1, y1 = self.area
+        best, best_score = None, -math.inf
+        for _ in range(200):
+            point = np.array([self.rng.uniform(x0, x1), self.rng.uniform(y0, y1)])
+            clearance = float(self.venue.clearance(point[None])[0]) - p.goal_clearance
+            apart = (
+                float(np.min(np.linalg.norm(others - point, axis=1))) - spacing
+                if others is not None and len(others)
+                else 0.0
+            )
+            score = min(clearance, apart)
+            if score >= 0:
+                return point
+            if score > best_score:
+                best, best_score = point, score
+        return best
+
+    # ------------------------------------------------------------ stepping
+    def _start(self) -> None:
+        n = len(self.people)
+        self.pos = np.zeros((n, 2))
+        self.vel = np.zeros((n, 2))
+        self.heading = np.zeros(n)
+        self.phase = self.rng.uniform(0, 2 * math.pi, n)
+        self.amp = np.zeros(n)
+        self.present = np.zeros(n, dtype=bool)
+        self.sway_phase = self.rng.uniform(0, 2 * math.pi, n)
+        for i, person in enumerate(self.people):
+            self.pos[i] = person.behaviour.start(self, i)
+            self.heading[i] = self.rng.uniform(-math.pi, math.pi)
+        for i, person in enumerate(self.people):
+            self.present[i] = person.behaviour.present(self, i, 0.0)
+            facing = person.behaviour.facing(self, i, 0.0)
+            if facing is not None:
+                self.heading[i] = facing
+        self._started = True
+
+    def advance(self, t: float) -> None:
+        """Step the simulation forward to time ``t`` (seconds; never backwards)."""
+        if not self._started:
+            self._start()
+        dt = float(self.params.time_step)
+        while self.t + dt <= t + 1e-9:
+            self._step(dt)
+            self.t += dt
+
+    def _step(self, dt: float) -> None:
+        p = self.params
+        n = len(self.people)
+        if n == 0:
+            return
+        t = self.t
+        goals = np.full((n, 2), np.nan)
+        speeds = np.zeros(n)
+        for i, person in enumerate(self.people):
+            was = self.present[i]
+            self.present[i] = person.behaviour.present(self, i, t)
+            if self.present[i] and not was:
+                self.pos[i] = person.behaviour.start(self, i)
+                self.vel[i] = 0.0
+            if self.present[i]:
+                goal, speed = person.behaviour.goal(self, i, t)
+                if goal is not None:
+                    goals[i], speeds[i] = goal, speed
+        idx = np.flatnonzero(self.present)
+        if len(idx) == 0:
+            return
+        pos, vel = self.pos[idx], self.vel[idx]
+        # Driving force towards the goal (or to rest when there is none).
+        to_goal = goals[idx] - pos
+        dist = np.linalg.norm(to_goal, axis=1)
+        has_goal = np.isfinite(dist)
+        direction = np.where(
+            has_goal[:, None], to_goal / np.maximum(np.nan_to_num(dist), 1e-9)[:, None], 0.0
+        )
+        wanted = speeds[idx] * np.clip(np.nan_to_num(dist) / p.slow_radius, 0.0, 1.0)
+        desired = np.nan_to_num(direction * wanted[:, None])
+        force = (desired - vel) / p.relax_time
+        # People repel people, more so those ahead.
+        if len(idx) > 1:
+            delta = pos[:, None, :] - pos[None, :, :]
+            d = np.linalg.norm(delta, axis=2)
+            np.fill_diagonal(d, np.inf)
+            normal = delta / np.maximum(d, 1e-9)[..., None]
+            magnitude = p.people_push * np.exp((2 * p.body_radius - d) / p.people_range)
+            heading_dir = np.stack([np.cos(self.heading[idx]), np.sin(self.heading[idx])], 1)
+            cos_phi = -np.einsum("ijk,ik->ij", normal, heading_dir)
+            weight = p.anisotropy + (1 - p.anisotropy) * (1 + cos_phi) / 2
+            force += np.sum((magnitude * weight)[..., None] * normal, axis=1)
+        # Walls and furniture repel.
+        od, on = self.venue.distances(pos)
+        force += np.sum(
+            (p.obstacle_push * np.exp((p.body_radius - od) / p.obstacle_range))[..., None] * on,
+            axis=1,
+        )
+        vel = vel + force * dt
+        top = np.maximum(speeds[idx], 0.3) * p.max_speed_factor
+        norm = np.linalg.norm(vel, axis=1)
+        vel *= np.minimum(1.0, top / np.maximum(norm, 1e-9))[:, None]
+        pos = pos + vel * dt
+        # Never inside an obstacle: push out along the nearest obstacle's normal.
+        od, on = self.venue.distances(pos)
+        nearest = np.argmin(od, axis=1)
+        depth = p.body_radius * 0.8 - od[np.arange(len(idx)), nearest]
+        inside = depth > 0
+        pos[inside] += on[np.flatnonzero(inside), nearest[inside]] * depth[inside, None]
+        self.pos[idx], self.vel[idx] = pos, vel
+        # Body heading, gait phase and amplitude.
+        speed = np.linalg.norm(vel, axis=1)
+        for k, i in enumerate(idx):
+            target = None
+            if speed[k] > 0.25:
+                target = math.atan2(vel[k, 1], vel[k, 0])
+            else:
+                target = self.people[i].behaviour.facing(self, i, t)
+            if target is not None:
+                error = (target - self.heading[i] + math.pi) % (2 * math.pi) - math.pi
+                step = p.turn_rate * dt
+                self.heading[i] += float(np.clip(error, -step, step))
+        heights = np.array([self.people[i].height for i in idx])
+        stride = self.body_params.stride_per_height * heights
+        self.phase[idx] = (self.phase[idx] + 2 * math.pi * speed * dt / stride) % (2 * math.pi)
+        target_amp = np.clip(speed / self.body_params.full_gait_speed, 0.0, 1.2)
+        self.amp[idx] += (target_amp - self.amp[idx]) * min(1.0, dt / p.relax_time)
+
+    # ------------------------------------------------------------- reading
+    def state(self) -> CrowdState:
+        """The present people now, as a :class:`CrowdState`."""
+        if not self._started:
+            self._start()
+        idx = np.flatnonzero(self.present)
+        sway_m = float(self.body_params.sway_m)
+        sway = (
+            sway_m
+            * np.sin(0.5 * math.pi * self.t + self.sway_phase[idx])
+            * np.clip(1.0 - self.amp[idx], 0, 1)
+        )
+        wrists = np.full((len(idx), 2, 3), np.nan)
+        for k, i in enumerate(idx):
+            target = self.people[i].behaviour.wrists(self, i, self.t)
+            if target is not None:
+                wrists[k] = target
+        pose = BodyPose(
+            x=self.pos[idx, 0].copy(),
+            y=self.pos[idx, 1].copy(),
+            heading=self.heading[idx].copy(),
+            height=np.array([self.people[i].height for i in idx]),
+            phase=self.phase[idx].copy(),
+            amplitude=self.amp[idx].copy(),
+            sway=sway,
+            wrist_targets=wrists if np.isfinite(wrists).any() else None,
+        )
+        return CrowdState(
+            self.t, np.array([self.people[i].id for i in idx], dtype=np.int64), idx, pose
+        )

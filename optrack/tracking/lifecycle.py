@@ -1,0 +1,119 @@
+"""Track life-cycle (Munaro 2012 section 5.4; OpenPTrack's ``Tracker::updateLostTracks``).
+
+A track is born NEW from a detection no track took (with enough confidence),
+is validated after ``detections_to_validate`` detections that confident, becomes NORMAL
+``sec_remain_new`` after its birth, MISSING when no sensor has detected it for
+``sec_before_missing``, and is deleted ``sec_before_old`` after its last
+detection, or ``sec_before_fake`` after its birth if it was never validated.
+"""
+
+from __future__ import annotations
+
+import bisect
+import dataclasses
+import enum
+
+import numpy as np
+
+from optrack.params import Params
+from optrack.types import TrackStatus
+
+__all__ = ["Fate", "TrackState", "advance", "on_detected", "record_position"]
+
+
+class Fate(enum.Enum):
+    KEEP = "keep"
+    FAKE = "fake"  # never validated in time
+    OLD = "old"  # not detected for too long
+
+
+@dataclasses.dataclass(eq=False)
+class TrackState:
+    """Everything the tracker keeps about one track (world frame, metres, seconds)."""
+
+    id: int
+    x: np.ndarray  # [x, y, vx, vy] at time t
+    P: np.ndarray  # 4x4
+    t: float
+    born: float
+    last_detection: float
+    height: float
+    confidence: float
+    status: TrackStatus = TrackStatus.NEW
+    validated: bool = False
+    detections: int = 0
+    confident_detections: int = 0  # with at least min_confidence_initialization
+    sensors: dict[str, float] = dataclasses.field(default_factory=dict)
+    #: filtered positions (t, x, y) after each update, in time order
+    history: list[tuple[float, float, float]] = dataclasses.field(default_factory=list)
+    #: appearance features of the first unoccluded detections (identity recovery)
+    features: list[np.ndarray] = dataclasses.field(default_factory=list)
+    recovery_done: bool = False
+
+    def position_at(self, t: float) -> tuple[float, float]:
+        """Constant-velocity extrapolation of the filtered position to time t."""
+        dt = t - self.t
+        return float(self.x[0] + dt * self.x[2]), float(self.x[1] + dt * self.x[3])
+
+
+def on_detected(
+    track: TrackState, t: float, confidence: float, height: float, sensor: str, params: Params
+) -> None:
+    """A detection (stamped t, possibly late) was associated to the track."""
+    track.detections += 1
+    if confidence >= params.min_confidence_initialization:
+        track.confident_detections += 1
+    track.last_detection = max(track.last_detection, t)
+    track.sensors[sensor] = max(track.sensors.get(sensor, t), t)
+    track.confidence = confidence
+    track.height += (height - track.height) / track.detections
+    if not track.validated and track.confident_detections >= params.detections_to_validate:
+        track.validated = True
+    track.status = (
+        TrackStatus.NORMAL
+        if track.last_detection - track.born >= params.sec_remain_new
+        else TrackStatus.NEW
+    )
+
+
+def advance(track: TrackState, now: float, params: Params) -> Fate:
+    """Update the status with the time ``now``; say whether the track lives on."""
+    if not track.validated and now - track.born >= params.sec_before_fake:
+        return Fate.FAKE
+    unseen = now - track.last_detection
+    if unseen >= params.sec_before_old:
+        return Fate.OLD
+    if unseen >= params.sec_before_missing:
+        track.status = TrackStatus.MISSING
+    return Fate.KEEP
+
+
+def record_position(track: TrackState, t: float, keep: float) -> None:
+    """Add the filtered position at t to the history (in time order); forget entries
+    older than ``keep`` seconds before the newest, keeping one such entry."""
+    entry = (t, float(track.x[0]), float(track.x[1]))
+    history = track.history
+    if not history or t >= history[-1][0]:
+        history.append(entry)
+    else:
+        bisect.insort(history, entry)
+    cutoff = history[-1][0] - keep
+    drop = 0
+    while drop + 1 < len(history) and history[drop + 1][0] <= cutoff:
+        drop += 1
+    if drop:
+        del history[:drop]
+
+
+def reference_position(track: TrackState, t: float, baseline: float) -> tuple[float, float, float]:
+    """The latest filtered position at least ``baseline`` before t: (x, y, age).
+
+    Age is NaN when the track has no position that old (its velocity is then
+    not measured).
+    """
+    history = track.history
+    k = bisect.bisect_right(history, (t - baseline, np.inf, np.inf)) - 1
+    if k < 0:
+        return 0.0, 0.0, float("nan")
+    ht, hx, hy = history[k]
+    return hx, hy, t - ht

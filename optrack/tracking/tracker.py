@@ -1,0 +1,552 @@
+"""The central tracker: every sensor's detection batches in, tracks out.
+
+Each :meth:`Tracker.update` takes one :class:`~optrack.types.DetectionBatch`
+(sensors are asynchronous, so batches come one at a time) and, as
+OpenPTrack's ``Tracker::updateTracks``:
+
+1. predicts every track to the batch's stamp (UKF, :mod:`.motion`);
+2. builds ``z = [x, y, vx, vy]`` and ``R`` for every (track, detection) pair,
+   the Mahalanobis ``d2`` and the gate (:mod:`.association`);
+3. assigns detections to tracks (``linear_sum_assignment``), then, with
+   appearance on, gives detections the gate left over to lost tracks whose
+   colour classifier recognises them (:mod:`.appearance`);
+4. updates the assigned tracks, starts tracks from confident detections left
+   over, gives a recently lost identity back to a new track its classifier
+   recognises, and runs the life-cycle (:mod:`.lifecycle`).
+
+A batch up to ``max_detection_delay`` behind the newest one is used: tracks
+are retrodicted to its stamp for association and update, and the update is
+carried forward to the track's own time (an out-of-sequence measurement,
+approximated as Bar-Shalom's one-step retrodiction). Older batches are
+dropped and counted in :meth:`Tracker.status`.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import math
+
+import numpy as np
+
+from optrack.errors import UserError
+from optrack.params import Params
+from optrack.tracking.appearance import AppearanceModel
+from optrack.tracking.association import (
+    assign,
+    association_cost,
+    gate_value,
+    mahalanobis,
+    measurement_noise,
+    measurements,
+    reach,
+    within_reach,
+)
+from optrack.tracking.lifecycle import (
+    Fate,
+    TrackState,
+    advance,
+    on_detected,
+    record_position,
+    reference_position,
+)
+from optrack.tracking.motion import ConstantVelocityUKF, position_variance
+from optrack.tracking.params import APPEARANCE_PARAMS, TRACKING_PARAMS
+from optrack.types import Detection, DetectionBatch, Track, TrackBatch
+
+__all__ = ["Tracker", "TrackerStatus", "TrackingError"]
+
+
+class TrackingError(UserError):
+    """Detections the tracker cannot use."""
+
+
+@dataclasses.dataclass
+class TrackerStatus:
+    """What the tracker reports about itself (the GUI and the status topic show it)."""
+
+    stamp: float
+    tracks: int
+    published: int
+    batches: int
+    dropped_batches: int
+    dropped_by_sensor: dict[str, int]
+    sensors: dict[str, float]  # sensor -> stamp of its last batch
+    silent_sensors: list[str]
+    appearance: bool
+    recovered_identities: int
+    warnings: list[str]
+
+
+class Tracker:
+    """Multi-sensor people tracker on the ground plane (OpenPTrack section 6, Munaro 2012)."""
+
+    def __init__(
+        self,
+        params: Params | None = None,
+        appearance_params: Params | None = None,
+        sensors: int | None = None,
+    ) -> None:
+        """``sensors``: how many sensors feed the tracker, when known (appearance 'auto')."""
+        self.params = params if params is not None else TRACKING_PARAMS.create()
+        self.appearance_params = (
+            appearance_params if appearance_params is not None else APPEARANCE_PARAMS.create()
+        )
+        self.sensor_count = sensors
+        self.tracks: list[TrackState] = []
+        self.next_id = 1
+        self.clock = -math.inf
+        self.seq = 0
+        self.batches = 0
+        self.dropped = 0
+        self.dropped_by_sensor: collections.Counter[str] = collections.Counter()
+        self.sensor_last: dict[str, float] = {}
+        self.recovered = 0
+        self.appearance = AppearanceModel(self.appearance_params)
+        self._derived_key: tuple[object, ...] = ()
+        self._refresh()
+
+    # ---------------------------------------------------------------- settings
+    def _refresh(self) -> None:
+        """Recompute what derives from parameters (they can change live)."""
+        p = self.params
+        key = (
+            p.gate_probability,
+            p.acceleration_variance,
+            p.acceleration_rate,
+            p.ukf_alpha,
+            p.ukf_beta,
+            p.ukf_kappa,
+        )
+        if key != self._derived_key:
+            self.ukf = ConstantVelocityUKF(p)
+            self.gate = gate_value(p.gate_probability)
+            self._derived_key = key
+
+    @property
+    def appearance_enabled(self) -> bool:
+        mode = self.params.appearance
+        if mode != "auto":
+            return mode == "on"
+        count = self.sensor_count if self.sensor_count is not None else len(self.sensor_last)
+        return count <= 1
+
+    # ------------------------------------------------------------------ update
+    def update(self, batch: DetectionBatch, now: float | None = None) -> TrackBatch | None:
+        """Process one batch; return the tracks after it, or None when it was dropped.
+
+        ``now`` is the time the batch is judged late against (default: the
+        newest stamp seen, which makes replays deterministic).
+        """
+        self._refresh()
+        p = self.params
+        t = float(batch.stamp)
+        if not math.isfinite(t):
+            raise TrackingError(
+                f"a detection batch of sensor '{batch.sensor_id}' has stamp {batch.stamp}; "
+                "stamps must be finite seconds."
+            )
+        if batch.frame_id != "world":
+            raise TrackingError(
+                f"detections of sensor '{batch.sensor_id}' are in frame '{batch.frame_id}'; the "
+                "tracker needs world-frame detections, so give the detector the calibration."
+            )
+        reference = max(self.clock, t) if now is None else now
+        if reference - t > p.max_detection_delay:
+            self.dropped += 1
+            self.dropped_by_sensor[batch.sensor_id] += 1
+            return None
+        self.batches += 1
+        self.clock = max(self.clock, t)
+        self.sensor_last[batch.sensor_id] = max(self.sensor_last.get(batch.sensor_id, t), t)
+
+        detections = [
+            d
+            for d in batch.detections
+            if d.confidence >= p.min_confidence_detections
+            and math.isfinite(d.x)
+            and math.isfinite(d.y)
+        ]
+        m = len(detections)
+        positions = np.array([(d.x, d.y) for d in detections], dtype=np.float64).reshape(m, 2)
+        confidence = np.array([d.confidence for d in detections], dtype=np.float64)
+        position_var = position_variance(_sensor_distances(detections), p)
+        appearance = self.appearance_enabled
+        features = (
+            self.appearance.features([d.histogram for d in detections])
+            if appearance and m
+            else None
+        )
+
+        taken = np.zeros(m, dtype=bool)
+        if self.tracks and m:
+            taken = self._associate(
+                t, batch.sensor_id, detections, positions, confidence, position_var, features
+            )
+        self._start_tracks(t, batch.sensor_id, detections, positions, position_var, features, taken)
+        if appearance and features is not None:
+            self._recover_identities(t)
+        self._advance(self.clock)
+        return self.output(self.clock)
+
+    def _associate(
+        self,
+        t: float,
+        sensor: str,
+        detections: list[Detection],
+        positions: np.ndarray,
+        confidence: np.ndarray,
+        position_var: np.ndarray,
+        features: np.ndarray | None,
+    ) -> np.ndarray:
+        """Steps 1-3 and the updates; returns which detections were taken."""
+        p = self.params
+        tracks = self.tracks
+        n, m = len(tracks), len(detections)
+        X = np.array([tr.x for tr in tracks])
+        P = np.array([tr.P for tr in tracks])
+        dt = np.array([t - tr.t for tr in tracks])
+        x_prior, P_prior = self.ukf.predict(X, P, dt)
+        zp, S0, Pxz = self.ukf.innovation(x_prior, P_prior)
+        refs = [reference_position(tr, t, p.velocity_baseline) for tr in tracks]
+        reference = np.array([(r[0], r[1]) for r in refs]).reshape(n, 2)
+        baseline = np.array([r[2] for r in refs])
+        z = measurements(positions, reference, baseline, zp)
+        R = measurement_noise(position_var, baseline)
+        S = S0[:, None] + R
+        z_tilde = z - zp[:, None, :]
+        d2, logdet = mahalanobis(z_tilde, S)
+        last_seen = np.array([_last_seen(tr) for tr in tracks]).reshape(n, 2)
+        unseen = np.array([t - tr.last_detection for tr in tracks])
+        allowed = (d2 <= self.gate) & within_reach(
+            positions, last_seen, unseen, p.max_speed, p.min_reach
+        )
+        # a detection too weak to start a track cannot revive a missing one either
+        missing = unseen >= p.sec_before_missing
+        weak = confidence < p.min_confidence_initialization
+        allowed &= ~(missing[:, None] & weak[None, :])
+        if features is not None:  # identities lost for long come back by appearance only
+            allowed[self._missing_candidates(t, set())] = False
+        cost = association_cost(d2, logdet, confidence, p.motion_weight, p.detector_weight)
+        pairs = assign(cost, allowed)
+
+        taken = np.zeros(m, dtype=bool)
+        if pairs:
+            ti = np.array([i for i, _ in pairs])
+            dj = np.array([j for _, j in pairs])
+            x_post, P_post = self.ukf.update(
+                x_prior[ti], P_prior[ti], zp[ti], S[ti, dj], Pxz[ti], z[ti, dj]
+            )
+            late = dt[ti] < 0
+            if late.any():  # carry an out-of-sequence update forward to the track's time
+                x_post[late], P_post[late] = self.ukf.predict(
+                    x_post[late], P_post[late], -dt[ti][late]
+                )
+            for k, (i, j) in enumerate(pairs):
+                self._take(
+                    tracks[i], max(tracks[i].t, t), x_post[k], P_post[k], t, sensor, detections[j]
+                )
+                taken[j] = True
+
+        if features is not None:
+            recovered = self._appearance_step(
+                t,
+                sensor,
+                detections,
+                positions,
+                position_var,
+                features,
+                taken,
+                {i for i, _ in pairs},
+            )
+            for j in recovered:
+                taken[j] = True
+            self._learn(t, pairs, detections, features)
+        return taken
+
+    def _take(
+        self,
+        track: TrackState,
+        state_time: float,
+        x: np.ndarray,
+        P: np.ndarray,
+        t: float,
+        sensor: str,
+        detection: Detection,
+    ) -> None:
+        track.x, track.P, track.t = x, P, state_time
+        record_position(
+            track, t, self.params.max_detection_delay + 2 * self.params.velocity_baseline
+        )
+        on_detected(track, t, detection.confidence, detection.height, sensor, self.params)
+
+    # -------------------------------------------------------------- appearance
+    def _missing_candidates(self, t: float, skip: set[int]) -> list[int]:
+        """Indices of validated tracks lost long enough to give their identity away."""
+        wait = self.appearance_params.sec_missing_before_recovery
+        return [
+            i
+            for i, tr in enumerate(self.tracks)
+            if i not in skip
+            and tr.validated
+            and t - tr.last_detection >= wait
+            and (c := self.appearance.classifiers.get(tr.id)) is not None
+            and c.trained
+        ]
+
+    def _reach(self, lost_for: np.ndarray) -> np.ndarray:
+        return reach(lost_for, self.params.max_speed, self.params.min_reach)
+
+    def _appearance_step(
+        self,
+        t: float,
+        sensor: str,
+        detections: list[Detection],
+        positions: np.ndarray,
+        position_var: np.ndarray,
+        features: np.ndarray,
+        taken: np.ndarray,
+        associated: set[int],
+    ) -> list[int]:
+        """Second association: detections the gate left over against lost tracks' classifiers."""
+        free = np.flatnonzero(~taken)
+        candidates = self._missing_candidates(t, associated)
+        if not free.size or not candidates:
+            return []
+        conf = np.array(
+            [self.appearance.confidence(self.tracks[i].id, features[free]) for i in candidates]
+        )
+        last = np.array([_last_seen(self.tracks[i]) for i in candidates])
+        lost_for = np.array([t - self.tracks[i].last_detection for i in candidates])
+        distance = np.linalg.norm(positions[free][None, :, :] - last[:, None, :], axis=2)
+        allowed = (conf >= self.appearance_params.min_confidence) & (
+            distance <= self._reach(lost_for)[:, None]
+        )
+        out = []
+        for a, b in assign(-conf, allowed):
+            track, j = self.tracks[candidates[a]], int(free[b])
+            lost_since = track.last_detection
+            x, P = self._initial_state(positions[j], position_var[j])
+            self._take(track, max(track.t, t), x, P, t, sensor, detections[j])
+            self._absorb_young(track, positions[j], lost_since)
+            out.append(j)
+        return out
+
+    def _absorb_young(self, track: TrackState, position: np.ndarray, lost_since: float) -> None:
+        """A track started near a recovered person while they were lost is that person
+        (its first detections were too occluded to recognise): merge it into the identity."""
+        a = self.appearance_params
+        for other in list(self.tracks):
+            if other is track or other.born <= lost_since:
+                continue
+            ox, oy = _last_seen(other)
+            if math.hypot(ox - position[0], oy - position[1]) > self.params.min_reach:
+                continue
+            if other.features:
+                score = np.mean(self.appearance.confidence(track.id, np.array(other.features)))
+                if score < a.min_confidence:
+                    continue
+            self.tracks.remove(other)
+            self.appearance.drop(other.id)
+            track.detections += other.detections
+            track.confident_detections += other.confident_detections
+
+    def _learn(
+        self,
+        t: float,
+        pairs: list[tuple[int, int]],
+        detections: list[Detection],
+        features: np.ndarray,
+    ) -> None:
+        """Each associated, unoccluded detection teaches its track; the others are negatives."""
+        for i, j in pairs:
+            track = self.tracks[i]
+            if detections[j].occluded or not np.all(np.isfinite(features[j])):
+                continue
+            if len(track.features) < self.appearance_params.recovery_detections:
+                track.features.append(features[j])
+            self.appearance.learn(t, track.id, features[j], np.delete(features, j, axis=0))
+
+    def _recover_identities(self, t: float) -> None:
+        """Give a lost identity back to a new track its classifier recognises (Munaro 5.4)."""
+        a = self.appearance_params
+        for track in list(self.tracks):
+            if track.recovery_done or track not in self.tracks:
+                continue
+            if track.detections > a.recovery_detections:
+                track.recovery_done = True
+                continue
+            if not track.features:
+                continue
+            F = np.array(track.features)
+            best: tuple[float, int | None, int] = (a.min_confidence, None, 0)
+            here = np.array(track.history[0][1:] if track.history else track.x[:2])
+            for other in self.tracks:
+                if other is track or not other.validated or other.last_detection >= track.born:
+                    continue
+                if track.born - other.last_detection < a.sec_missing_before_recovery:
+                    continue
+                c = self.appearance.classifiers.get(other.id)
+                if c is None or not c.trained:
+                    continue
+                last = np.array(_last_seen(other))
+                reach = self._reach(np.array([track.born - other.last_detection]))[0]
+                if np.linalg.norm(here - last) > reach:
+                    continue
+                score = float(np.mean(self.appearance.confidence(other.id, F)))
+                if score >= best[0]:
+                    best = (score, other.id, 0)
+            for tid, lx, ly, last_detection in self.appearance.lost_candidates():
+                if last_detection >= track.born:
+                    continue
+                reach = self._reach(np.array([track.born - last_detection]))[0]
+                if np.hypot(here[0] - lx, here[1] - ly) > reach:
+                    continue
+                score = float(np.mean(self.appearance.lost_confidence(tid, F)))
+                if score >= best[0]:
+                    best = (score, tid, 1)
+            if best[1] is not None:
+                self._give_identity(track, best[1], from_deleted=bool(best[2]))
+                track.recovery_done = True
+
+    def _give_identity(self, track: TrackState, old_id: int, from_deleted: bool) -> None:
+        self.appearance.drop(track.id)
+        if from_deleted:
+            classifier = self.appearance.take_lost(old_id)
+        else:
+            old = next(tr for tr in self.tracks if tr.id == old_id)
+            self.tracks.remove(old)
+            classifier = self.appearance.classifiers.pop(old_id, None)
+            track.born = min(track.born, old.born)
+            track.detections += old.detections
+        track.id = old_id
+        track.validated = True
+        if classifier is not None:
+            self.appearance.adopt(old_id, classifier)
+        self.recovered += 1
+
+    # ---------------------------------------------------------- birth, death
+    def _initial_state(
+        self, position: np.ndarray, position_var: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        x = np.array([position[0], position[1], 0.0, 0.0])
+        v = self.params.initial_velocity_variance
+        return x, np.diag([position_var, position_var, v, v])
+
+    def _start_tracks(
+        self,
+        t: float,
+        sensor: str,
+        detections: list[Detection],
+        positions: np.ndarray,
+        position_var: np.ndarray,
+        features: np.ndarray | None,
+        taken: np.ndarray,
+    ) -> None:
+        p = self.params
+        for j, d in enumerate(detections):
+            if taken[j] or d.confidence < p.min_confidence_initialization:
+                continue
+            x, P = self._initial_state(positions[j], position_var[j])
+            track = TrackState(
+                id=self.next_id,
+                x=x,
+                P=P,
+                t=t,
+                born=t,
+                last_detection=t,
+                height=d.height,
+                confidence=d.confidence,
+            )
+            self.next_id += 1
+            record_position(track, t, p.max_detection_delay + 2 * p.velocity_baseline)
+            on_detected(track, t, d.confidence, d.height, sensor, p)
+            if features is not None and not d.occluded and np.all(np.isfinite(features[j])):
+                track.features.append(features[j])
+            self.tracks.append(track)
+
+    def _advance(self, now: float) -> None:
+        kept = []
+        for track in self.tracks:
+            fate = advance(track, now, self.params)
+            if fate is Fate.KEEP:
+                kept.append(track)
+            elif fate is Fate.OLD:
+                x, y = _last_seen(track)
+                self.appearance.forget(track.id, x, y, track.last_detection, now)
+            else:
+                self.appearance.drop(track.id)
+        self.tracks = kept
+
+    # ------------------------------------------------------------------ output
+    def output(self, t: float | None = None) -> TrackBatch:
+        """Validated tracks, positions carried to time t (default: the newest stamp)."""
+        t = self.clock if t is None else t
+        self.seq += 1
+        missing = self.params.sec_before_missing
+        tracks = []
+        for tr in self.tracks:
+            if not tr.validated:
+                continue
+            x, y = tr.position_at(max(t, tr.t))
+            tracks.append(
+                Track(
+                    id=tr.id,
+                    x=x,
+                    y=y,
+                    height=float(tr.height),
+                    vx=float(tr.x[2]),
+                    vy=float(tr.x[3]),
+                    age=float(t - tr.born),
+                    confidence=float(tr.confidence),
+                    status=tr.status,
+                    sensors=sorted(s for s, ts in tr.sensors.items() if t - ts <= missing),
+                )
+            )
+        return TrackBatch(stamp=float(t), seq=self.seq, tracks=tracks)
+
+    def status(self, now: float | None = None) -> TrackerStatus:
+        """Counters and warnings; a sensor silent for ``sensor_timeout`` is named."""
+        now = self.clock if now is None else now
+        silent = sorted(
+            s for s, last in self.sensor_last.items() if now - last > self.params.sensor_timeout
+        )
+        warnings = [
+            f"sensor '{s}' has sent no detections for {now - self.sensor_last[s]:.1f} s; "
+            "check that its detector is running and its cable is in."
+            for s in silent
+        ]
+        if self.dropped:
+            warnings.append(
+                f"{self.dropped} detection batches arrived more than "
+                f"{self.params.max_detection_delay:g} s late and were dropped; check the clocks "
+                "of the detector computers."
+            )
+        return TrackerStatus(
+            stamp=now,
+            tracks=len(self.tracks),
+            published=sum(1 for tr in self.tracks if tr.validated),
+            batches=self.batches,
+            dropped_batches=self.dropped,
+            dropped_by_sensor=dict(self.dropped_by_sensor),
+            sensors=dict(self.sensor_last),
+            silent_sensors=silent,
+            appearance=self.appearance_enabled,
+            recovered_identities=self.recovered,
+            warnings=warnings,
+        )
+
+
+def _last_seen(track: TrackState) -> tuple[float, float]:
+    """Where the track was last detected (its newest filtered position)."""
+    if track.history:
+        return track.history[-1][1], track.history[-1][2]
+    return float(track.x[0]), float(track.x[1])
+
+
+def _sensor_distances(detections: list[Detection]) -> np.ndarray:
+    """Distance of each detection from its sensor (0 when the camera-frame centroid is unknown)."""
+    return np.array(
+        [math.sqrt(sum(c * c for c in d.camera_xyz)) if d.camera_xyz else 0.0 for d in detections],
+        dtype=np.float64,
+    )

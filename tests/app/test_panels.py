@@ -1,0 +1,120 @@
+"""Outputs, Log and the no-site source: what the operator asks for, and what is reported."""
+
+import logging
+
+from PySide6.QtCore import Qt
+
+from app.source import NO_SITE, SiteSource
+from app.widgets.log_panel import LogPanel, QtLogHandler
+from app.widgets.outputs_panel import OutputsPanel, check_address
+
+
+def test_outputs_table_shows_what_the_site_reports(qtbot):
+    panel = OutputsPanel()
+    qtbot.addWidget(panel)
+    panel.set_status(
+        "outputs",
+        {
+            "destinations": [
+                {
+                    "kind": "udp",
+                    "address": "127.0.0.1:21234",
+                    "enabled": True,
+                    "packets_per_s": 30.04,
+                },
+                {"kind": "websocket", "address": "0.0.0.0:8765", "enabled": False},
+            ]
+        },
+    )
+    rows = [
+        [panel.table.item(r, c).text() for c in range(1, 4)] for r in range(panel.table.rowCount())
+    ]
+    assert rows == [["UDP JSON", "127.0.0.1:21234", "30.0"], ["WebSocket", "0.0.0.0:8765", ""]]
+    assert panel.table.item(0, 0).checkState() == Qt.CheckState.Checked
+    assert panel.table.item(1, 0).checkState() == Qt.CheckState.Unchecked
+
+
+def test_outputs_send_add_remove_and_enable_requests(qtbot):
+    panel = OutputsPanel()
+    qtbot.addWidget(panel)
+    panel.set_connected(True)
+    panel.kind.setCurrentIndex(panel.kind.findData("osc"))
+    assert panel.address.text() == "127.0.0.1:9000"  # the default address follows the kind
+    panel.address.setText("192.168.1.20:7000")
+    with qtbot.waitSignal(panel.add_requested) as added:
+        panel.add_button.click()
+    assert added.args == ["osc", "192.168.1.20:7000"]
+    panel.set_destinations([{"kind": "osc", "address": "192.168.1.20:7000", "enabled": True}])
+    with qtbot.waitSignal(panel.enable_requested) as enabled:
+        panel.table.item(0, 0).setCheckState(Qt.CheckState.Unchecked)
+    assert enabled.args == ["osc", "192.168.1.20:7000", False]
+    panel.table.selectRow(0)
+    with qtbot.waitSignal(panel.remove_requested) as removed:
+        panel.remove_button.click()
+    assert removed.args == ["osc", "192.168.1.20:7000"]
+
+
+def test_outputs_refuse_a_bad_address_with_a_sentence(qtbot):
+    panel = OutputsPanel()
+    qtbot.addWidget(panel)
+    panel.set_connected(True)
+    panel.address.setText("localhost")
+    with qtbot.assertNotEmitted(panel.add_requested):
+        panel.add_button.click()
+    assert panel.message.text() == "'localhost' is not host:port; write it like 127.0.0.1:21234."
+    assert (
+        check_address("host:70000") == "the port in 'host:70000' must be a number from 1 to 65535."
+    )
+    assert check_address("[::1]:21234") is None
+
+
+def test_outputs_without_a_site_cannot_be_added(qtbot):
+    panel = OutputsPanel()
+    qtbot.addWidget(panel)
+    assert not panel.add_button.isEnabled()
+    assert panel.message.text().startswith(NO_SITE)
+
+
+def test_no_site_answers_every_request_with_a_sentence(qtbot):
+    source = SiteSource()
+    assert source.describe() == NO_SITE and not source.connected
+    with qtbot.waitSignal(source.log) as said:
+        source.set_params("detection", {"voxel_size": 0.08})
+    assert said.args == ["warning", f"{NO_SITE}: detection.voxel_size was not sent to any node."]
+    with qtbot.waitSignal(source.log) as said:
+        source.add_output("udp", "127.0.0.1:21234")
+    assert said.args[1] == f"{NO_SITE}: the udp output 127.0.0.1:21234 was not started."
+
+
+def test_log_keeps_the_newest_sentences_with_their_level(qtbot):
+    panel = LogPanel(max_lines=3)
+    qtbot.addWidget(panel)
+    for k in range(5):
+        panel.append("info", f"message {k}")
+    panel.append("error", "sensor 'door' was unplugged; plug it back in.")
+    lines = panel.lines()
+    assert len(lines) == 3
+    assert lines[-1].endswith("Error: sensor 'door' was unplugged; plug it back in.")
+    assert lines[0].endswith("message 3")
+
+
+def test_python_warnings_reach_the_log_from_any_thread(qtbot):
+    import threading
+
+    panel = LogPanel()
+    qtbot.addWidget(panel)
+    handler = QtLogHandler()
+    handler.message.connect(panel.append)
+    logger = logging.getLogger("optrack.test_gui_log")
+    logger.addHandler(handler)
+    try:
+        worker = threading.Thread(
+            target=lambda: logger.warning("calibration file %s is old", "a.yaml")
+        )
+        worker.start()
+        worker.join()
+        logger.info("not shown: below the handler's level")
+        qtbot.waitUntil(lambda: len(panel.lines()) == 1)
+    finally:
+        logger.removeHandler(handler)
+    assert panel.lines()[0].endswith("Warning: calibration file a.yaml is old")

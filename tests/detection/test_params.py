@@ -1,0 +1,51 @@
+"""Detection parameters: one registered schema, OpenPTrack's defaults per sensor model."""
+
+from __future__ import annotations
+
+import pytest
+
+from optrack.detection import DETECTION_PARAMS, detection_params
+from optrack.params import REGISTRY, ParamError
+
+
+def test_schema_is_registered_with_openptracks_generic_defaults():
+    assert REGISTRY["detection"] is DETECTION_PARAMS
+    p = detection_params()
+    assert (p.voxel_size, p.min_height, p.max_height, p.heads_minimum_distance) == (
+        0.06,
+        1.0,
+        2.3,
+        0.3,
+    )
+    assert (p.minimum_luminance, p.min_confidence, p.max_distance) == (120, -1.75, 15.0)
+    assert (p.background_resolution, p.background_seconds) == (0.3, 3.0)
+
+
+@pytest.mark.parametrize(
+    ("model", "sampling", "max_distance", "min_confidence"),
+    [("kinect1", 4, 5.0, -1.75), ("kinect2", 4, 10.0, -1.75), ("sr4500", 1, 10.0, -2.0)],
+)
+def test_sensor_models_get_openptracks_values(model, sampling, max_distance, min_confidence):
+    p = detection_params(model)
+    assert (p.sampling_factor, p.max_distance, p.min_confidence) == (
+        sampling,
+        max_distance,
+        min_confidence,
+    )
+
+
+def test_time_of_flight_uses_infrared_and_confidence():
+    p = detection_params("sr4500")
+    assert p.hog_image == "infrared" and p.confidence_threshold == 200
+
+
+def test_children_preset_lowers_the_shortest_person_and_overrides_win():
+    assert detection_params("kinect2", "children").min_height < 1.0
+    assert detection_params("kinect2", "children", {"min_height": 0.7}).min_height == 0.7
+
+
+def test_bad_preset_and_bad_value_are_refused():
+    with pytest.raises(ParamError, match="no preset 'toddlers'"):
+        detection_params(preset="toddlers")
+    with pytest.raises(ParamError, match="voxel_size"):
+        detection_params(overrides={"voxel_size": 0.0})
