@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QAction, QKeySequence
-from PySide6.QtWidgets import QDockWidget, QLabel, QMainWindow, QWidget
+from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow, QWidget
 
-from app.source import NO_SITE, SiteSource
+from app.source import NO_SITE, SiteSource, node_schemas
 from app.view_params import VIEW_PARAMS
 from app.widgets.log_panel import LogPanel, QtLogHandler
 from app.widgets.outputs_panel import OutputsPanel
@@ -26,20 +26,9 @@ from app.widgets.top_view import TopView
 from app.widgets.tracks_table import TracksTable
 from app.widgets.world_view import WorldView
 from optrack import __version__
+from optrack.errors import UserError
 from optrack.geometry import backproject_points, transform_points
-from optrack.params import REGISTRY, Schema
 from optrack.types import DetectionBatch, NetworkCalibration, RGBDFrame, TrackBatch
-
-# The stages the site's nodes run, shown before a site says which it has.
-NODE_STAGES = ("detection", "tracking", "appearance", "smoothing")
-
-
-def node_schemas() -> dict[str, Schema]:
-    """The registered schemas of the detector and tracker nodes' stages."""
-    import optrack.detection.params  # noqa: F401 - registers the detection schema
-    import optrack.tracking.params  # noqa: F401 - registers the tracking schemas
-
-    return {stage: REGISTRY[stage] for stage in NODE_STAGES if stage in REGISTRY}
 
 
 def preview_cloud(
@@ -123,6 +112,8 @@ class MainWindow(QMainWindow):
 
         self.calibration: NetworkCalibration | None = None
         self._connections: list[tuple[Any, Any]] = []
+        self._site_clouds: set[str] = set()
+        self._stage_reporter: dict[str, str] = {}
         self.source = SiteSource(self)
         self.set_source(source if source is not None else self.source)
 
@@ -135,6 +126,10 @@ class MainWindow(QMainWindow):
 
     def _menus(self) -> None:
         file_menu = self.menuBar().addMenu("&File")
+        open_calibration = QAction("&Open calibration…", self)
+        open_calibration.triggered.connect(self._ask_calibration)
+        file_menu.addAction(open_calibration)
+        file_menu.addSeparator()
         load = QAction("&Load parameter preset…", self)
         load.triggered.connect(self.parameters._ask_load)
         save = QAction("&Save parameter preset…", self)
@@ -156,11 +151,14 @@ class MainWindow(QMainWindow):
         for signal, slot in self._connections:
             signal.disconnect(slot)
         self.source = source
+        self._site_clouds.clear()
+        self._stage_reporter.clear()
         self._connections = [
             (source.tracks, self.show_tracks),
             (source.calibration, self.show_calibration),
             (source.status, self.show_status),
             (source.preview, self.show_preview),
+            (source.cloud, self.show_cloud),
             (source.schemas, self.show_schemas),
             (source.log, self.log_panel.append),
             (source.connection, self.show_connection),
@@ -202,19 +200,50 @@ class MainWindow(QMainWindow):
         self.top_view.set_calibration(self.calibration, max_depth)
         self.world.set_calibration(self.calibration, self.view_params.frustum_depth)
 
+    def open_calibration(self, path: str) -> bool:
+        """Show a calibration file's cameras (what a site would use), or say why not."""
+        from optrack.calibration.files import load_network
+
+        try:
+            calibration = load_network(path)
+        except UserError as error:
+            self.log_panel.append("error", str(error))
+            return False
+        self.show_calibration(calibration)
+        self.log_panel.append(
+            "info", f"Showing the {len(calibration.sensors)} cameras of the calibration {path}."
+        )
+        return True
+
+    def _ask_calibration(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(
+            self, "Open a calibration file", "", "Calibration (*.yaml *.yml)"
+        )
+        if path:
+            self.open_calibration(path)
+
     def show_status(self, node: str, values: dict) -> None:
         self.sensors.set_status(node, values)
         self.outputs.set_status(node, values)
+        # Several nodes may run a stage (one detector per sensor): the panel follows the
+        # first that reported it, so that it does not flip between their values.
         for stage, stage_values in (values.get("params") or {}).items():
-            self.parameters.set_values(stage, stage_values)
+            if self._stage_reporter.setdefault(stage, node) == node:
+                self.parameters.set_values(stage, stage_values)
 
     def show_preview(self, sensor_id: str, frame: RGBDFrame, batch: DetectionBatch | None) -> None:
         self.sensors.set_preview(sensor_id, frame, batch)
+        if sensor_id in self._site_clouds:
+            return
         if self.calibration is not None and sensor_id in self.calibration.sensors:
             points, colors = preview_cloud(
                 frame, self.calibration.pose(sensor_id), self.view_params.cloud_stride
             )
             self.world.set_cloud(sensor_id, points, colors)
+
+    def show_cloud(self, sensor_id: str, points: np.ndarray) -> None:
+        self._site_clouds.add(sensor_id)
+        self.world.set_cloud(sensor_id, points, None)
 
     def show_schemas(self, schemas: dict, values: dict) -> None:
         self.parameters.set_schemas(schemas, values)

@@ -22,7 +22,17 @@ from typing import Any
 
 from PySide6.QtCore import QObject, Signal
 
-__all__ = ["NO_SITE", "OUTPUT_KINDS", "SENSOR_STATUS_KEYS", "SiteSource"]
+from optrack.outputs.streams import DEFAULT_OSC_PORT, DEFAULT_UDP_PORT, DEFAULT_WEBSOCKET_PORT
+from optrack.params import REGISTRY, Schema
+
+__all__ = [
+    "NO_SITE",
+    "NODE_STAGES",
+    "OUTPUT_KINDS",
+    "SENSOR_STATUS_KEYS",
+    "SiteSource",
+    "node_schemas",
+]
 
 NO_SITE = "No site connected"
 
@@ -36,6 +46,24 @@ SENSOR_STATUS_KEYS: tuple[tuple[str, str, str], ...] = (
 )
 
 OUTPUT_KINDS = ("udp", "osc", "websocket")
+# The ports optrack.outputs uses when an address leaves its port out.
+OUTPUT_PORTS = {
+    "udp": DEFAULT_UDP_PORT,
+    "osc": DEFAULT_OSC_PORT,
+    "websocket": DEFAULT_WEBSOCKET_PORT,
+}
+
+# The stages the site's nodes run, shown before a site says which it has.
+NODE_STAGES = ("detection", "tracking", "appearance", "smoothing")
+
+
+def node_schemas() -> dict[str, Schema]:
+    """The registered schemas of the detector and tracker nodes' stages (importing the
+    modules that register them)."""
+    import optrack.detection.params  # noqa: F401 - registers the detection schema
+    import optrack.tracking.params  # noqa: F401 - registers the tracking schemas
+
+    return {stage: REGISTRY[stage] for stage in NODE_STAGES if stage in REGISTRY}
 
 
 class SiteSource(QObject):
@@ -50,6 +78,9 @@ class SiteSource(QObject):
     * ``preview(str sensor, RGBDFrame frame, object batch)``: a down-sampled
       frame and the detections found in it (a ``DetectionBatch`` or None);
       detection boxes are in the preview's depth-image pixels.
+    * ``cloud(str sensor, ndarray points)``: a decimated point cloud, Nx3 float32
+      in the world frame (when the site sends none, the window makes one from
+      the preview and the calibration).
     * ``schemas(dict stage -> Schema, dict stage -> dict values)``: the
       parameters the nodes take and their current values.
     * ``log(str level, str text)``: a sentence for the operator; level is
@@ -62,6 +93,7 @@ class SiteSource(QObject):
     calibration = Signal(object)
     status = Signal(str, dict)
     preview = Signal(str, object, object)
+    cloud = Signal(str, object)
     schemas = Signal(dict, dict)
     log = Signal(str, str)
     connection = Signal(str)

@@ -239,11 +239,16 @@ def build_parser() -> argparse.ArgumentParser:
     p = command(
         "eval",
         "Track a recording and score it against its ground truth (CLEAR MOT).",
-        NotAvailable("the tracker evaluation"),
+        "optrack.evaluation.run:cmd_eval",
     )
     p.add_argument("recording", help="recording directory with ground truth")
     p.add_argument("--calibration", help="calibration file (default: the recording's true poses)")
     p.add_argument("--config", help="YAML parameter file")
+    p.add_argument(
+        "--appearance",
+        choices=("auto", "on", "off"),
+        help="appearance recovery of identities (default: the config's, auto: on for one sensor)",
+    )
     _add_json(p)
 
     # calibrate

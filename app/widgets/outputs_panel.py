@@ -22,20 +22,24 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.source import NO_SITE, OUTPUT_KINDS
+from app.source import NO_SITE, OUTPUT_KINDS, OUTPUT_PORTS
+from optrack.errors import UserError
+from optrack.outputs.udp import parse_address
 
 KIND_TITLES = {"udp": "UDP JSON", "osc": "OSC", "websocket": "WebSocket"}
-DEFAULT_ADDRESSES = {"udp": "127.0.0.1:21234", "osc": "127.0.0.1:9000", "websocket": "0.0.0.0:8765"}
+DEFAULT_ADDRESSES = {kind: f"127.0.0.1:{port}" for kind, port in OUTPUT_PORTS.items()}
 COLUMNS = ("on", "kind", "address", "packets/s")
 
 
-def check_address(address: str) -> str | None:
-    """Why ``host:port`` cannot be a destination, or None when it can."""
-    host, sep, port = address.strip().rpartition(":")
-    if not sep or not host:
-        return f"'{address}' is not host:port; write it like 127.0.0.1:21234."
-    if not port.isdigit() or not 1 <= int(port) <= 65535:
-        return f"the port in '{address}' must be a number from 1 to 65535."
+def check_address(kind: str, address: str) -> str | None:
+    """Why ``address`` cannot be a ``kind`` destination (optrack.outputs' own parser says),
+    or None when it can."""
+    try:
+        parse_address(
+            address, OUTPUT_PORTS[kind], f"{KIND_TITLES[kind]} address", kind == "websocket"
+        )
+    except UserError as error:
+        return str(error)
     return None
 
 
@@ -61,7 +65,8 @@ class OutputsPanel(QWidget):
             self.kind.addItem(KIND_TITLES[kind], kind)
         self.address = QLineEdit(DEFAULT_ADDRESSES[OUTPUT_KINDS[0]])
         self.address.setToolTip(
-            "host:port. UDP and OSC send to that address; a WebSocket output listens on it."
+            "HOST:PORT. UDP JSON and OSC send to that address; a WebSocket output is a server "
+            "listening on it."
         )
         self.add_button = QPushButton("Add")
         self.remove_button = QPushButton("Remove")
@@ -97,7 +102,7 @@ class OutputsPanel(QWidget):
 
     def request_add(self) -> None:
         kind, address = self.kind.currentData(), self.address.text().strip()
-        problem = check_address(address)
+        problem = check_address(kind, address)
         if problem is not None:
             self.message.setText(problem)
             return

@@ -154,6 +154,15 @@ class ParamEditor(QWidget):
         self.slider.setValue(round((value - self.param.min) / self._slider_step))
         self.slider.blockSignals(False)
 
+    def busy(self) -> bool:
+        """Is the operator using this control now (dragging, typing)?"""
+        if self.slider is not None and self.slider.isSliderDown():
+            return True
+        return any(
+            widget is not None and widget.hasFocus()
+            for widget in (self.spin, self.line, self.combo)
+        )
+
     def value(self) -> Any:
         if self.check is not None:
             return self.check.isChecked()
@@ -256,6 +265,8 @@ class ParametersPanel(QWidget):
         body = QWidget()
         form = QFormLayout(body)
         form.setFieldGrowthPolicy(QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
+        # A dock is narrow: each name above its control, so nothing is cut off.
+        form.setRowWrapPolicy(QFormLayout.RowWrapPolicy.WrapAllRows)
         if schema.help:
             intro = QLabel(schema.help)
             intro.setWordWrap(True)
@@ -267,7 +278,8 @@ class ParametersPanel(QWidget):
             editor.edited.connect(
                 lambda value, stage=stage, name=param.name: self.edit(stage, name, value)
             )
-            label = QLabel(_title(param.name))
+            unit = f" ({param.unit})" if param.unit else ""
+            label = QLabel(f"<b>{_title(param.name)}</b>{unit}")
             label.setToolTip(editor.toolTip())
             form.addRow(label, editor)
             editors[param.name] = editor
@@ -275,6 +287,7 @@ class ParametersPanel(QWidget):
         scroll = QScrollArea()
         scroll.setObjectName(stage)
         scroll.setWidgetResizable(True)
+        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         scroll.setWidget(body)
         title = stage if stage not in self.local_stages else f"{stage} (this window)"
         self.pages.addItem(scroll, title)
@@ -294,13 +307,21 @@ class ParametersPanel(QWidget):
         return True
 
     def set_values(self, stage: str, values: Mapping[str, Any]) -> None:
-        """Values reported by the nodes: shown, not sent back."""
+        """Values reported by the nodes: shown, not sent back. A control the operator is
+        using keeps what the operator is doing."""
         if stage not in self.schemas:
             return
-        known = {k: v for k, v in values.items() if k in self.schemas[stage]}
-        self.values[stage].update(known)
+        editors = self.editors[stage]
+        known = {
+            k: v for k, v in values.items() if k in self.schemas[stage] and not editors[k].busy()
+        }
+        try:
+            self.values[stage].update(known)
+        except ParamError as error:
+            self._say(f"A node reported a value this window refuses: {error}")
+            return
         for name in known:
-            self.editors[stage][name].set_value(self.values[stage][name])
+            editors[name].set_value(self.values[stage][name])
 
     def _apply(self, stage: str, values: Mapping[str, Any]) -> None:
         changed = self.values[stage].update(values)

@@ -68,8 +68,9 @@ CORNER_PARAMS = register(
             ),
             Param(
                 "fast_check",
-                True,
-                help="Quickly skip images without a board (OpenCV's CALIB_CB_FAST_CHECK).",
+                False,
+                help="Quickly skip images without a board (OpenCV's CALIB_CB_FAST_CHECK; it "
+                "also misses small boards).",
             ),
             Param(
                 "infrared_equalize",
@@ -276,48 +277,53 @@ def find_corners(
     """The board's inner corners in ``image`` (Nx2 float64 pixels, board order), or None.
 
     Colour images are converted to grey. Infrared images (8 or 16 bit) are
-    scaled to 8 bits, histogram-equalised and, when narrower than
-    ``infrared_min_width``, upsampled by a whole factor before detection and
-    sub-pixel refinement (OpenPTrack's SR4500 procedure); the corners are
-    returned in the original image's pixels (pixel centres at integers).
+    scaled to 8 bits and searched for the board histogram-equalised and, when
+    narrower than ``infrared_min_width``, upsampled by a whole factor
+    (OpenPTrack's SR4500 procedure). Corners are refined to sub-pixel accuracy
+    in the original, unequalised image (equalising moves edges; upsampled when
+    the squares are too small for a 3-pixel window) and returned in the
+    original image's pixels (pixel centres at integers).
     """
     p = params if params is not None else CORNER_PARAMS.create()
-    gray = to_gray(image)
+    gray = to_gray(image)  # linear in the light: sub-pixel refinement works on this one
+    detect = gray
     factor = 1
     if infrared:
         if p.infrared_equalize:
-            gray = cv2.equalizeHist(gray)
+            detect = cv2.equalizeHist(gray)
         factor = _upsample_factor(gray.shape[1], int(p.infrared_min_width))
-        if factor > 1:
-            gray = cv2.resize(gray, None, fx=factor, fy=factor, interpolation=cv2.INTER_CUBIC)
+    search, scale = detect, float(factor)
+    if factor > 1:
+        search = cv2.resize(detect, None, fx=factor, fy=factor, interpolation=cv2.INTER_CUBIC)
+    elif gray.shape[1] > p.max_detection_width:
+        scale = float(p.max_detection_width) / gray.shape[1]
+        search = cv2.resize(detect, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
     if p.fast_check:
         flags |= cv2.CALIB_CB_FAST_CHECK
-    shrink = min(1.0, float(p.max_detection_width) / gray.shape[1])
-    search = (
-        gray
-        if shrink >= 1.0
-        else cv2.resize(gray, None, fx=shrink, fy=shrink, interpolation=cv2.INTER_AREA)
-    )
     found, corners = cv2.findChessboardCorners(search, board.size, flags=flags)
     if not found or corners is None or len(corners) != board.count:
         return None
     corners = corners.reshape(-1, 2).astype(np.float32)
-    if shrink < 1.0:
-        corners = (corners + 0.5) / shrink - 0.5
-    window = _subpix_window(corners, board, int(p.subpix_window))
     criteria = (
         cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT,
         int(p.subpix_iterations),
         float(p.subpix_epsilon),
     )
-    refined = cv2.cornerSubPix(
-        gray, corners.reshape(-1, 1, 2), (window, window), (-1, -1), criteria
-    ).reshape(-1, 2)
-    ordered = _canonical_order(refined, gray, board).astype(np.float64)
-    if factor > 1:
-        ordered = (ordered + 0.5) / factor - 0.5
-    return ordered
+    native = (corners + 0.5) / scale - 0.5
+    window = _subpix_window(native, board, int(p.subpix_window))
+    if factor > 1 and window < 3:  # squares too small here: refine where they are larger
+        window = _subpix_window(corners, board, int(p.subpix_window))
+        larger = cv2.resize(gray, None, fx=factor, fy=factor, interpolation=cv2.INTER_CUBIC)
+        refined = cv2.cornerSubPix(
+            larger, corners.reshape(-1, 1, 2), (window, window), (-1, -1), criteria
+        ).reshape(-1, 2)
+        refined = (refined + 0.5) / scale - 0.5
+    else:
+        refined = cv2.cornerSubPix(
+            gray, native.reshape(-1, 1, 2).astype(np.float32), (window, window), (-1, -1), criteria
+        ).reshape(-1, 2)
+    return _canonical_order(refined, gray, board).astype(np.float64)
 
 
 class CoverageMap:

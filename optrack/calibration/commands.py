@@ -108,7 +108,7 @@ def cmd_intrinsics(args: argparse.Namespace) -> int:
     else:
         k = result.intrinsics
         _info(
-            f"fx={k.fx:.2f} fy={k.fy:.2f} cx={k.cx:.2f} cy={k.cy:.2f} dist={list(np.round(k.dist, 5))} "
+            f"fx={k.fx:.2f} fy={k.fy:.2f} cx={k.cx:.2f} cy={k.cy:.2f} dist={[round(float(v), 5) for v in k.dist]} "
             f"RMS {result.rms:.3f} px over {len(result.used)} views"
             + (
                 f"; rejected {', '.join(labels[i] for i in result.rejected)}"

@@ -54,6 +54,7 @@ __all__ = [
     "load_calibration",
     "load_network",
     "new_calibration_id",
+    "now_iso",
     "openptrack_camera_poses",
     "ros_static_transforms",
     "save_calibration",
@@ -95,7 +96,7 @@ class SensorEntry(msgspec.Struct, forbid_unknown_fields=True, omit_defaults=True
         return np.asarray(self.world_T_camera, dtype=np.float64)
 
 
-class CalibrationFile(msgspec.Struct, forbid_unknown_fields=True, omit_defaults=True):
+class CalibrationFile(msgspec.Struct, forbid_unknown_fields=True):
     """A network calibration as stored on disk (see the module docstring)."""
 
     sensors: dict[str, SensorEntry]

@@ -128,11 +128,12 @@ NETWORK_PARAMS = register(
             ),
             Param(
                 "board_thickness",
-                0.0,
+                0.005,
                 min=0.0,
                 max=0.1,
                 unit="m",
-                help="Height of the board's printed face above the floor when it lies on it.",
+                help="Height of the board's printed face above the floor when it lies on it "
+                "(a board on foam or card: measure yours).",
             ),
             Param(
                 "floor_sigma",

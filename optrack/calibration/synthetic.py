@@ -85,6 +85,7 @@ def synthetic_session(
     camera_height: float = 2.6,
     intrinsics: dict[str, Intrinsics] | None = None,
     max_angle_deg: float = 65.0,
+    board_thickness: float = 0.005,
 ) -> SyntheticSession:
     """A session with ``views`` instants seen by two or more sensors, then
     ``floor_views`` instants with the board on the floor seen by at least one.
@@ -157,7 +158,7 @@ def synthetic_session(
         rotation = Rotation.from_euler("z", rng.uniform(0, 2 * np.pi)).as_matrix() @ np.diag(
             [1.0, -1.0, -1.0]
         )
-        centre = np.array([*rng.uniform(-half, half, 2), 0.0])
+        centre = np.array([*rng.uniform(-half, half, 2), board_thickness])
         pose = make_pose(rotation, centre - rotation @ board.center)
         if observe(pose, 1):
             placed += 1

@@ -3,10 +3,11 @@
 Dalal and Triggs' HOG with their linear SVM (OpenCV's
 ``HOGDescriptor_getDefaultPeopleDetector``, a 64x128 window), evaluated
 once per candidate on its full-body window as PCL's ``PersonClassifier``
-does: the head-to-floor height in pixels fills ``hog_window_fill`` of the
-window's height, the window is centred on the projected body centre, the
-parts outside the image are black. The confidence is the SVM score
-``w . x + b`` (Munaro et al. 2012, section 3.4).
+does: the person, head to floor, fills ``hog_window_fill`` of the window's
+height, centred; the parts outside the image are black. The window is seen
+by a virtual level camera turned towards the person (:func:`level_window`),
+so that a tilted sensor's people stand upright in it. The confidence is the
+SVM score ``w . x + b`` (Munaro et al. 2012, section 3.4).
 
 The same window is used on the infrared image after histogram
 equalisation (time-of-flight sensors, Munaro et al. 2016 section 4.2), and
@@ -15,8 +16,6 @@ frames.
 """
 
 from __future__ import annotations
-
-import math
 
 import cv2
 import numpy as np
@@ -27,7 +26,9 @@ __all__ = [
     "equalised_infrared",
     "hsv_histogram",
     "luminance",
+    "level_window",
     "person_window",
+    "window_footprint",
 ]
 
 #: The default people detector's window (width, height), pixels.
@@ -55,46 +56,74 @@ class HogClassifier:
         return descriptors @ self.w + self.b
 
 
-def window_geometry(
-    top_px: np.ndarray, bottom_px: np.ndarray, center_px: np.ndarray, fill: float
-) -> tuple[int, int, int, int]:
-    """The HOG window (xmin, ymin, width, height) in image pixels of a person whose head
-    and feet project to ``top_px`` and ``bottom_px`` (PCL's ``PersonClassifier::evaluate``)."""
-    person = float(bottom_px[1] - top_px[1])
-    height = max(int(math.floor(person / fill + 0.5)), 2)
-    width = max(int(math.floor(person * HOG_WINDOW[0] / (fill * HOG_WINDOW[1]) + 0.5)), 1)
-    xmin = int(math.floor(center_px[0] - width / 2 + 0.5))
-    ymin = int(math.floor(center_px[1] - height / 2 + 0.5))
-    return xmin, ymin, width, height
+def level_window(
+    center: np.ndarray, height: float, up: np.ndarray, K: np.ndarray, fill: float
+) -> np.ndarray:
+    """Homography (3x3) from HOG window pixels to image pixels for a person.
+
+    The window is what a virtual camera would see at the sensor's optical
+    centre, level (its y axis down along the floor's normal ``up``) and
+    turned towards the person's ``center`` (camera frame, half way up); its
+    focal length makes the ``height`` fill ``fill`` of the window's height,
+    centred (PCL's ``PersonClassifier`` window, Munaro et al. 2012 section
+    3.4, with the sensor's tilt taken out: a rotation-only homography
+    ``K R K_v^-1``, Hartley and Zisserman eq. 8.8).
+    """
+    down = -np.asarray(up, dtype=np.float64)
+    horizontal = center - (center @ down) * down
+    distance = float(np.linalg.norm(horizontal))
+    if distance < 1e-6:  # straight below the camera: look along the camera's own z
+        horizontal = np.array([0.0, 0.0, 1.0]) - down[2] * down
+        distance = float(np.linalg.norm(horizontal))
+    z = horizontal / distance
+    x = np.cross(down, z)
+    camera_R_virtual = np.stack([x, down, z], axis=1)
+    out_w, out_h = HOG_WINDOW
+    f = fill * out_h * distance / max(height, 1e-6)
+    below = float(center @ down)  # how far the centre is below the optical centre
+    K_virtual = np.array(
+        [
+            [f, 0.0, (out_w - 1) / 2.0],
+            [0.0, f, (out_h - 1) / 2.0 - f * below / distance],
+            [0.0, 0.0, 1.0],
+        ]
+    )
+    return np.asarray(K, dtype=np.float64) @ camera_R_virtual @ np.linalg.inv(K_virtual)
+
+
+def window_footprint(window_to_image: np.ndarray, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    """The image pixels (u0, v0, u1, v1), half-open and clipped, a window covers."""
+    out_w, out_h = HOG_WINDOW
+    corners = np.array([[0, 0, 1], [out_w - 1, 0, 1], [0, out_h - 1, 1], [out_w - 1, out_h - 1, 1]])
+    mapped = corners @ window_to_image.T
+    uv = mapped[:, :2] / mapped[:, 2:3]
+    rows, cols = shape
+    u0 = int(np.clip(np.floor(uv[:, 0].min()), 0, cols))
+    u1 = int(np.clip(np.ceil(uv[:, 0].max()) + 1, 0, cols))
+    v0 = int(np.clip(np.floor(uv[:, 1].min()), 0, rows))
+    v1 = int(np.clip(np.ceil(uv[:, 1].max()) + 1, 0, rows))
+    return u0, v0, u1, v1
 
 
 def person_window(
     image: np.ndarray,
-    box: tuple[int, int, int, int],
+    window_to_image: np.ndarray,
     origin: tuple[int, int] = (0, 0),
     stride: int = 1,
 ) -> np.ndarray:
-    """The 64x128 window of ``box`` (xmin, ymin, width, height; full-image pixels),
-    black outside the image, sampled bilinearly (as PCL's ``PersonClassifier::resize``).
+    """The 64x128 window, sampled bilinearly from ``image``, black outside it.
 
     ``image`` may be a strided crop of the full image whose pixel (0, 0) is the
     full image's ``origin`` (u, v) and whose pixels are ``stride`` apart.
     """
-    xmin, ymin, width, height = box
-    out_w, out_h = HOG_WINDOW
     u0, v0 = origin
-    sx, sy = width / out_w, height / out_h
-    # Window pixel (i, j) samples full-image pixel (xmin + (i + 0.5) sx - 0.5, ...).
-    inverse = np.array(
-        [
-            [sx / stride, 0.0, (xmin + 0.5 * sx - 0.5 - u0) / stride],
-            [0.0, sy / stride, (ymin + 0.5 * sy - 0.5 - v0) / stride],
-        ]
+    full_to_crop = np.array(
+        [[1.0 / stride, 0.0, -u0 / stride], [0.0, 1.0 / stride, -v0 / stride], [0.0, 0.0, 1.0]]
     )
-    return cv2.warpAffine(
+    return cv2.warpPerspective(
         image,
-        inverse,
-        (out_w, out_h),
+        full_to_crop @ window_to_image,
+        HOG_WINDOW,
         flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
         borderMode=cv2.BORDER_CONSTANT,
         borderValue=0,

@@ -63,6 +63,14 @@ class Candidate:
         """Extent across the camera's view (ground-frame x), metres."""
         return float(np.ptp(self.points[:, 0]))
 
+    def head_ratio(self, head_fraction: float) -> float:
+        """Extent of its top ``head_fraction`` over its whole extent on the floor: small
+        for a person (a head on shoulders), near 1 for a flat top (a partition, a box)."""
+        z = self.points[:, 2]
+        top = self.points[z >= self.height * (1.0 - head_fraction), :2]
+        whole = float(np.ptp(self.points[:, :2], axis=0).max())
+        return float(np.ptp(top, axis=0).max()) / whole if whole > 0 else 1.0
+
     @property
     def center(self) -> np.ndarray:
         """The person's centre: half their height, above where they stand (PCL's tcenter)."""
@@ -125,10 +133,14 @@ def _merge_close(
     return merged
 
 
-def _head_maxima(points: np.ndarray, bin_size: float, min_distance: float) -> np.ndarray:
+def _head_maxima(
+    points: np.ndarray, bin_size: float, min_distance: float, prominence: float
+) -> np.ndarray:
     """Indices (into ``points``) of the heads: maxima of the height profile along x,
     highest first, each at least ``min_distance`` on the floor from the higher ones
-    (PCL's ``HeightMap2D``: compute, searchLocalMaxima, filterMaxima)."""
+    (PCL's ``HeightMap2D``: compute, searchLocalMaxima, filterMaxima), and standing
+    out by at least ``prominence`` (SciPy's topographic prominence) so that the
+    noise on a flat top (a partition, a cupboard) makes no heads."""
     x, z = points[:, 0], points[:, 2]
     bins = ((x - x.min()) / bin_size).astype(np.int64)
     order = np.lexsort((z, bins))  # by bin, then height: the last of each bin is its top
@@ -138,7 +150,8 @@ def _head_maxima(points: np.ndarray, bin_size: float, min_distance: float) -> np
     top_point = np.full(len(profile), -1)
     profile[sorted_bins[last]] = z[order[last]]
     top_point[sorted_bins[last]] = order[last]
-    peaks, _ = find_peaks(np.r_[-np.inf, profile, -np.inf])  # the ends can be maxima too
+    # The ends can be maxima too: pad with empty (zero-height) bins.
+    peaks, _ = find_peaks(np.r_[0.0, profile, 0.0], prominence=prominence)
     peaks = peaks - 1
     peaks = peaks[np.argsort(-profile[peaks], kind="stable")]
     kept: list[int] = []
@@ -160,7 +173,9 @@ def head_based_subclusters(
     """
     head_fraction = float(params.head_fraction)
     min_distance = float(params.heads_minimum_distance)
-    maxima = _head_maxima(candidate.points, float(params.voxel_size), min_distance)
+    maxima = _head_maxima(
+        candidate.points, float(params.voxel_size), min_distance, float(params.head_prominence)
+    )
     if len(maxima) <= 1:
         return [candidate]
     floor = candidate.points[:, :2]
@@ -181,7 +196,8 @@ def person_candidates(points: np.ndarray, params: Params) -> list[Candidate]:
     sizes, min..max points from the person limits), drop clusters taller
     than ``max_height``, merge clusters whose heads are close, split
     clusters by heads when large enough; then keep candidates whose height
-    and width are within the person limits.
+    and width are within the person limits and that have a head: their top
+    ``head_fraction`` is narrower than ``max_head_ratio`` of their extent.
     """
     head_fraction = float(params.head_fraction)
     min_points, max_points = cluster_point_limits(params)
@@ -208,8 +224,11 @@ def person_candidates(points: np.ndarray, params: Params) -> list[Candidate]:
         else:
             people.append(cluster)
     min_width, max_width = float(params.min_width), float(params.max_width)
+    max_head_ratio = float(params.max_head_ratio)
     return [
         c
         for c in people
-        if min_height <= c.height <= max_height and min_width <= c.width <= max_width
+        if min_height <= c.height <= max_height
+        and min_width <= c.width <= max_width
+        and c.head_ratio(head_fraction) <= max_head_ratio
     ]

@@ -249,6 +249,16 @@ DETECTION_PARAMS = register(
                 help="Two heads closer than this on the floor are one person.",
             ),
             Param(
+                "head_prominence",
+                0.1,
+                min=0.0,
+                max=1.0,
+                step=0.01,
+                unit="m",
+                help="A head stands out of its cluster's height profile by at least this "
+                "(0: every local maximum, as PCL).",
+            ),
+            Param(
                 "merge_distance",
                 0.4,
                 min=0.0,
@@ -265,6 +275,15 @@ DETECTION_PARAMS = register(
                 max=0.5,
                 step=0.005,
                 help="The head is this top fraction of a person's height (PCL: 1/8).",
+            ),
+            Param(
+                "max_head_ratio",
+                0.8,
+                min=0.1,
+                max=1.0,
+                step=0.05,
+                help="A person has a head: the floor extent of their top head_fraction is at "
+                "most this fraction of their whole extent (1: no check, as PCL).",
             ),
             Param(
                 "subcluster_min_points_factor",
@@ -426,7 +445,7 @@ DETECTION_PARAMS = register(
 SENSOR_MODELS: dict[str, dict[str, Any]] = {
     "default": {},
     "kinect1": {"max_distance": 5.0, "sampling_factor": 4, "min_confidence": -1.75},
-    "kinect2": {"max_distance": 10.0, "sampling_factor": 4, "min_confidence": -1.75},
+    "kinect2": {"max_distance": 10.0, "sampling_factor": 2, "min_confidence": -1.75},
     "stereo": {"max_distance": 15.0, "sampling_factor": 4, "min_confidence": -1.75},
     "sr4500": {
         "max_distance": 10.0,
@@ -447,6 +466,8 @@ SENSOR_MODELS: dict[str, dict[str, Any]] = {
         "minimum_luminance": 0,
         "ground_inlier_distance": 0.12,
         "centroid_depth_compensation": 0.0,
+        "head_prominence": 0.0,
+        "max_head_ratio": 1.0,
     },
 }
 

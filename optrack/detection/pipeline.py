@@ -31,9 +31,10 @@ from optrack.detection.classifier import (
     HogClassifier,
     equalised_infrared,
     hsv_histogram,
+    level_window,
     luminance,
     person_window,
-    window_geometry,
+    window_footprint,
 )
 from optrack.detection.clustering import Candidate, person_candidates
 from optrack.detection.ground import GroundEstimator, GroundStore, check_ground, ground_T_camera
@@ -240,60 +241,52 @@ class PeopleDetector:
         color_intrinsics: Intrinsics,
     ) -> Judgement:
         p = self.params
+        plane = self.ground.plane
+        assert plane is not None
         hx, hy = candidate.head
-        key_points_g = np.array(
-            [[hx, hy, candidate.height], [hx, hy, 0.0], [hx, hy, candidate.height / 2.0]]
+        height = candidate.height
+        top_c, bottom_c, center_c = transform_points(
+            c_T_g, np.array([[hx, hy, height], [hx, hy, 0.0], [hx, hy, height / 2.0]])
         )
-        top_c, bottom_c, center_c = transform_points(c_T_g, key_points_g)
         pixels, _ = project(np.stack([top_c, bottom_c, center_c]), cloud.intrinsics)
-        window_box = window_geometry(pixels[0], pixels[1], pixels[2], float(p.hog_window_fill))
+        fill = float(p.hog_window_fill)
+        to_depth = level_window(center_c, height, plane.normal, cloud.intrinsics.K, fill)
 
-        # The candidate's pixels: a strided crop of its HOG window, in the ground frame.
+        # The candidate's pixels: a strided crop of its window, in the ground frame.
         rows_img, cols_img = cloud.shape
-        stride = max(1, round(window_box[3] / HOG_WINDOW[1]))
-        xmin, ymin, width, height = window_box
-        u0 = max(xmin, 0)
-        v0 = max(ymin, 0)
-        u1 = min(xmin + width, cols_img)
-        v1 = min(ymin + height, rows_img)
+        person_px = abs(float(pixels[1][1] - pixels[0][1]))
+        stride = max(1, round(person_px / fill / HOG_WINDOW[1]))
+        u0, v0, u1, v1 = window_footprint(to_depth, cloud.shape)
         if u1 > u0 and v1 > v0:
             crop_c = cloud.grid(slice(v0, v1, stride), slice(u0, u1, stride))
             crop_g = transform_points(g_T_c, crop_c)
         else:
             crop_c = crop_g = np.full((0, 0, 3), np.nan)
         valid = np.isfinite(crop_g[..., 2])
-        floor_band = float(p.ground_inlier_distance)
-        radius = float(p.person_radius)
         with np.errstate(invalid="ignore"):
-            near_axis = np.hypot(crop_g[..., 0] - hx, crop_g[..., 1] - hy) < radius
-            above_floor = crop_g[..., 2] > floor_band
             mask = (
                 valid
-                & near_axis
-                & above_floor
-                & (crop_g[..., 2] < candidate.height + float(p.voxel_size))
+                & (np.hypot(crop_g[..., 0] - hx, crop_g[..., 1] - hy) < float(p.person_radius))
+                & (crop_g[..., 2] > float(p.ground_inlier_distance))
+                & (crop_g[..., 2] < height + float(p.voxel_size))
             )
 
         if source == "depth":
-            silhouette = person_window(
-                (mask * np.uint8(255)).astype(np.uint8), window_box, (u0, v0), stride
-            )
-            score = float(self.hog.scores([silhouette])[0])
+            silhouette = (mask * np.uint8(255)).astype(np.uint8)
+            window = person_window(silhouette, to_depth, (u0, v0), stride)
+            score = float(self.hog.scores([window])[0])
             accepted = score > float(p.min_depth_confidence)
         else:
             assert image is not None
-            if image_intrinsics is not cloud.intrinsics:
-                image_pixels, _ = project(np.stack([top_c, bottom_c, center_c]), image_intrinsics)
-                image_box = window_geometry(
-                    image_pixels[0], image_pixels[1], image_pixels[2], float(p.hog_window_fill)
-                )
-            else:
-                image_box = window_box
-            score = float(self.hog.scores([person_window(image, image_box)])[0])
+            to_image = (
+                to_depth
+                if image_intrinsics is cloud.intrinsics
+                else level_window(center_c, height, plane.normal, image_intrinsics.K, fill)
+            )
+            score = float(self.hog.scores([person_window(image, to_image)])[0])
             accepted = score > float(p.min_confidence)
 
         # Flags, histogram, output box.
-        person_px = float(pixels[1][1] - pixels[0][1])
         out_of_view = self._outside_fraction(pixels, person_px, (rows_img, cols_img)) > float(
             p.out_of_view_fraction
         )
@@ -302,8 +295,7 @@ class PeopleDetector:
         )
         histogram: list[float] = []
         if color is not None and np.any(mask):
-            person_points = crop_c[mask]
-            uv, _ = project(person_points, color_intrinsics)
+            uv, _ = project(crop_c[mask], color_intrinsics)
             u = np.rint(uv[:, 0]).astype(np.int64)
             v = np.rint(uv[:, 1]).astype(np.int64)
             inside = (u >= 0) & (u < color.shape[1]) & (v >= 0) & (v < color.shape[0])
@@ -320,15 +312,13 @@ class PeopleDetector:
         by1 = min(rows_img, int(pixels[2][1] + box_h / 2.0))
         compensation = float(p.centroid_depth_compensation)
         camera_xyz = center_c * (1.0 + compensation / float(np.linalg.norm(center_c)))
-        if self.world_T_camera is not None:
-            position = transform_points(self.world_T_camera, camera_xyz[None])[0]
-        else:
-            position = transform_points(g_T_c, camera_xyz[None])[0]
+        pose = self.world_T_camera if self.world_T_camera is not None else g_T_c
+        position = transform_points(pose, camera_xyz[None])[0]
         detection = Detection(
             x=float(position[0]),
             y=float(position[1]),
             z=float(position[2]),
-            height=float(candidate.height),
+            height=float(height),
             confidence=score,
             box=(bx0, by0, max(bx1 - bx0, 0), max(by1 - by0, 0)),
             camera_xyz=(float(camera_xyz[0]), float(camera_xyz[1]), float(camera_xyz[2])),

@@ -126,7 +126,9 @@ def zenoh_config(params: Params, *, host: bool = False) -> zenoh.Config:
         try:
             return zenoh.Config.from_file(str(path))
         except zenoh.ZError as error:
-            raise BusConfigError(f"bus.zenoh_config {path} is not a valid Zenoh file: {error}") from None
+            raise BusConfigError(
+                f"bus.zenoh_config {path} is not a valid Zenoh file: {error}"
+            ) from None
     config = zenoh.Config()
     mode = str(params.mode)
     listen = endpoints(str(params.listen))

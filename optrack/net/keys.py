@@ -53,7 +53,9 @@ class SiteKeys:
         return f"{ROOT}/{self.site}"
 
     def detections(self, sensor: str = "*") -> str:
-        return f"{self.prefix}/detections/{sensor if sensor == '*' else check_name('sensor', sensor)}"
+        return (
+            f"{self.prefix}/detections/{sensor if sensor == '*' else check_name('sensor', sensor)}"
+        )
 
     @property
     def tracks(self) -> str:

@@ -32,7 +32,19 @@ from optrack.sim.scenario import BoardSpec
 from optrack.sim.venue import Venue
 from optrack.types import Intrinsics
 
-__all__ = ["BOARD_PARAMS", "BoardStep", "Checkerboard", "Operator", "plan_board_steps"]
+__all__ = [
+    "BOARD_PARAMS",
+    "BoardStep",
+    "Checkerboard",
+    "Operator",
+    "SensorView",
+    "board_pose_facing",
+    "neighbouring_pairs",
+    "plan_board_steps",
+]
+
+PROGRESS = 0.1  # m: walking nearer by less than this is no progress
+LINE_OF_SIGHT_TFAR = 0.995  # a board corner hidden before 99.5 % of the way counts as hidden
 
 BOARD_PARAMS = register(
     Schema(
@@ -62,6 +74,15 @@ BOARD_PARAMS = register(
                 "",
                 "Infrared albedo of the black squares (toner absorbs near infrared).",
             ),
+            Param(
+                "grip_depth",
+                0.04,
+                0.0,
+                0.3,
+                0.01,
+                "m",
+                "Hands hold the board this far behind its face.",
+            ),
             Param("carry_height", 1.15, 0.5, 2.0, 0.05, "m", "Board centre height while walking."),
             Param(
                 "carry_distance", 0.4, 0.2, 1.0, 0.05, "m", "Board centre in front of the operator."
@@ -74,7 +95,7 @@ BOARD_PARAMS = register(
             Param("grid_step", 0.25, 0.05, 1.0, 0.05, "m", "Spacing of the candidate spots."),
             Param(
                 "square_px_min",
-                9.0,
+                7.0,
                 3.0,
                 50.0,
                 0.5,
@@ -101,12 +122,48 @@ BOARD_PARAMS = register(
             ),
             Param(
                 "max_incidence_deg",
-                50.0,
+                60.0,
                 10.0,
                 85.0,
                 1.0,
                 "deg",
                 "Largest angle between the board's normal and a sensor.",
+            ),
+            Param(
+                "floor_max_incidence_deg",
+                65.0,
+                10.0,
+                85.0,
+                1.0,
+                "deg",
+                "Largest angle between a board on the floor and a sensor.",
+            ),
+            Param(
+                "wall_clearance",
+                0.5,
+                0.0,
+                3.0,
+                0.05,
+                "m",
+                "Candidate spots keep this far from the walls.",
+            ),
+            Param(
+                "spot_clearance",
+                0.3,
+                0.0,
+                1.0,
+                0.01,
+                "m",
+                "Free space around the operator's spots, beyond the body.",
+            ),
+            Param(
+                "height_preference",
+                0.01,
+                0.0,
+                1.0,
+                0.01,
+                "1/m",
+                "Score lost per metre away from the carrying height.",
             ),
             Param(
                 "image_margin",
@@ -223,7 +280,7 @@ class Checkerboard:
         return np.where(printed, value, 1.0).astype(np.float32)
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(eq=False)
 class BoardStep:
     """One placement: the board's pose, where the operator stands and faces."""
 
@@ -244,65 +301,86 @@ class SensorView:
     max_range: float
 
 
+def _facing_rotations(normals: np.ndarray) -> np.ndarray:
+    """Rotations (N, 3, 3) of boards whose printed face looks along ``normals`` (N, 3):
+    z = -normal, x horizontal (world x for a board lying flat), y = z x x."""
+    n = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    z = -n
+    x = np.cross([0.0, 0.0, 1.0], n)
+    flat = np.linalg.norm(x, axis=1) < 1e-6
+    x[flat] = [1.0, 0.0, 0.0]
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    y = np.cross(z, x)
+    return np.stack([x, y, z], axis=2)
+
+
 def board_pose_facing(center: np.ndarray, normal: np.ndarray, board: Checkerboard) -> np.ndarray:
     """``world_T_board`` with the printed face looking along ``normal``, x horizontal,
     and the pattern's centre at ``center``."""
-    n = np.asarray(normal, dtype=np.float64)
-    n /= np.linalg.norm(n)
-    z = -n
-    x = np.cross([0.0, 0.0, 1.0], n)
-    if np.linalg.norm(x) < 1e-6:  # lying flat: any horizontal x
-        x = np.array([1.0, 0.0, 0.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    rotation = np.stack([x, y, z], axis=1)
+    rotation = _facing_rotations(np.asarray(normal, dtype=np.float64).reshape(1, 3))[0]
     return make_pose(rotation, np.asarray(center) - rotation @ board.center)
 
 
-def _views_board(
-    view: SensorView, world_T_board: np.ndarray, board: Checkerboard, params: Params, floor: bool
-) -> float:
-    """Square size in pixels at which the sensor sees the whole board (0 when it does not)."""
+def _square_pixels(
+    view: SensorView,
+    rotations: np.ndarray,
+    centers: np.ndarray,
+    board: Checkerboard,
+    params: Params,
+    floor: bool,
+) -> np.ndarray:
+    """For N candidate board poses (rotations (N, 3, 3), pattern centres (N, 3)): the
+    smallest square side, in pixels, with which the sensor sees the whole pattern in
+    its image and range and at a usable angle; 0 where it does not."""
     camera_T_world = invert(view.world_T_camera)
-    outline = transform_points(camera_T_world @ world_T_board, board.outline)
+    local = board.outline - board.center  # (4, 3)
+    world = np.einsum("nij,kj->nki", rotations, local) + centers[:, None, :]
+    camera = world @ camera_T_world[:3, :3].T + camera_T_world[:3, 3]
+    z = camera[..., 2]
     k = view.intrinsics
-    if np.any(outline[:, 2] < view.min_range) or np.any(outline[:, 2] > view.max_range):
-        return 0.0
-    u = k.fx * outline[:, 0] / outline[:, 2] + k.cx
-    v = k.fy * outline[:, 1] / outline[:, 2] + k.cy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = k.fx * camera[..., 0] / z + k.cx
+        v = k.fy * camera[..., 1] / z + k.cy
     mu, mv = params.image_margin * k.width, params.image_margin * k.height
-    if u.min() < mu or u.max() > k.width - 1 - mu or v.min() < mv or v.max() > k.height - 1 - mv:
-        return 0.0
-    face_normal = -world_T_board[:3, 2]
-    center = world_T_board[:3, :3] @ board.center + world_T_board[:3, 3]
-    to_camera = view.world_T_camera[:3, 3] - center
-    distance = float(np.linalg.norm(to_camera))
-    cos_incidence = float(face_normal @ to_camera) / distance
-    if cos_incidence < math.cos(math.radians(params.max_incidence_deg)):
-        return 0.0
-    # Smallest side of the projected pattern, in squares: foreshortening included.
-    sides = np.hypot(np.diff(np.append(u, u[0])), np.diff(np.append(v, v[0])))
-    per_square = min(
-        sides[0] / (board.cols + 1),
-        sides[1] / (board.rows + 1),
-        sides[2] / (board.cols + 1),
-        sides[3] / (board.rows + 1),
+    ok = np.all((z >= view.min_range) & (z <= view.max_range), axis=1)
+    ok &= (u.min(axis=1) >= mu) & (u.max(axis=1) <= k.width - 1 - mu)
+    ok &= (v.min(axis=1) >= mv) & (v.max(axis=1) <= k.height - 1 - mv)
+    to_camera = view.world_T_camera[:3, 3] - centers
+    cos_incidence = np.einsum("ni,ni->n", -rotations[:, :, 2], to_camera) / np.linalg.norm(
+        to_camera, axis=1
     )
+    limit = params.floor_max_incidence_deg if floor else params.max_incidence_deg
+    ok &= cos_incidence >= math.cos(math.radians(limit))
+    sides = np.hypot(np.diff(u, axis=1, append=u[:, :1]), np.diff(v, axis=1, append=v[:, :1]))
+    squares = np.array([board.cols + 1, board.rows + 1] * 2, dtype=np.float64)
+    per_square = np.min(sides / squares, axis=1)
     wanted = params.floor_square_px_min if floor else params.square_px_min
-    return float(per_square) if per_square >= wanted else 0.0
+    ok &= per_square >= wanted
+    return np.where(ok, per_square, 0.0)
 
 
 def _line_of_sight(
     scene: o3d.t.geometry.RaycastingScene, views: list[SensorView], points: np.ndarray
 ) -> bool:
-    rays = []
-    for view in views:
-        origin = view.world_T_camera[:3, 3]
-        for point in points:
-            rays.append(np.concatenate([origin, point - origin]))
+    """Whether every sensor sees every point past the venue (nothing static in between)."""
+    rays = [
+        np.concatenate([v.world_T_camera[:3, 3], p - v.world_T_camera[:3, 3]])
+        for v in views
+        for p in points
+    ]
     tensor = o3d.core.Tensor(np.asarray(rays, dtype=np.float32))
-    blocked = scene.test_occlusions(tensor, tnear=0.0, tfar=0.995).numpy()
-    return not bool(blocked.any())
+    return not bool(scene.test_occlusions(tensor, tnear=0.0, tfar=LINE_OF_SIGHT_TFAR).numpy().any())
+
+
+def neighbouring_pairs(views: list[SensorView]) -> list[tuple[int, int]]:
+    """Pairs of sensors next to each other in bearing around the room's centre."""
+    if len(views) < 2:
+        return []
+    bearings = [math.atan2(v.world_T_camera[1, 3], v.world_T_camera[0, 3]) for v in views]
+    order = [int(i) for i in np.argsort(bearings)]
+    if len(views) == 2:
+        return [(0, 1)]
+    return [tuple(sorted((order[k], order[(k + 1) % len(order)]))) for k in range(len(order))]
 
 
 def plan_board_steps(
@@ -313,103 +391,97 @@ def plan_board_steps(
     params: Params | None = None,
     body_radius: float = 0.25,
 ) -> list[BoardStep]:
-    """Board placements: one per sensor, one per neighbouring pair, then ``spec.floor_placements``
-    on the floor. Placements no spot satisfies are skipped."""
+    """Board placements: one per sensor, one per neighbouring pair, then up to
+    ``spec.floor_placements`` on the floor. A placement no spot satisfies is skipped."""
     params = params if params is not None else BOARD_PARAMS.create()
     board = Checkerboard(spec, params)
-    step = float(params.grid_step)
-    xs = np.arange(-venue.half[0] + 0.5, venue.half[0] - 0.5 + 1e-9, step)
-    ys = np.arange(-venue.half[1] + 0.5, venue.half[1] - 0.5 + 1e-9, step)
+    step, edge = float(params.grid_step), float(params.wall_clearance)
+    xs = np.arange(-venue.half[0] + edge, venue.half[0] - edge + 1e-9, step)
+    ys = np.arange(-venue.half[1] + edge, venue.half[1] - edge + 1e-9, step)
     grid = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
-    heights = [float(h) for h in str(params.hold_heights).split(",") if h.strip()]
+    heights = np.array([float(h) for h in str(params.hold_heights).split(",") if h.strip()])
     steps: list[BoardStep] = []
 
-    # Neighbouring pairs: sensors in order of their bearing around the room centre.
-    bearings = [math.atan2(v.world_T_camera[1, 3], v.world_T_camera[0, 3]) for v in views]
-    order = list(np.argsort(bearings))
-    subsets: list[tuple[int, ...]] = [(i,) for i in range(len(views))]
-    if len(views) == 2:
-        subsets.append((0, 1))
-    elif len(views) > 2:
-        subsets += [
-            tuple(sorted((int(order[k]), int(order[(k + 1) % len(order)]))))
-            for k in range(len(order))
-        ]
-
+    # Held upright, facing one sensor or between two.
+    centers = np.concatenate([np.column_stack([grid, np.full(len(grid), h)]) for h in heights])
+    subsets: list[tuple[int, ...]] = [(i,) for i in range(len(views))] + neighbouring_pairs(views)
     for subset in subsets:
         chosen = [views[i] for i in subset]
-        best, best_score = None, 0.0
-        for xy in grid:
-            for h in heights:
-                center = np.array([xy[0], xy[1], h])
-                to_cameras = [v.world_T_camera[:3, 3] - center for v in chosen]
-                normal = sum(t / np.linalg.norm(t) for t in to_cameras)
-                horizontal = np.array([normal[0], normal[1]])
-                if np.linalg.norm(horizontal) < 1e-6:
-                    continue
-                heading = math.atan2(horizontal[1], horizontal[0])
-                spot = xy - params.carry_distance * horizontal / np.linalg.norm(horizontal)
-                if not venue.is_free(spot[None], body_radius + 0.05)[0]:
-                    continue
-                pose = board_pose_facing(center, normal, board)
-                sizes = [_views_board(v, pose, board, params, floor=False) for v in chosen]
-                if min(sizes) <= 0:
-                    continue
-                score = min(
-                    min(s, params.square_px_wanted) / params.square_px_wanted for s in sizes
-                )
-                score -= 0.01 * abs(h - params.carry_height)
-                if score > best_score:
-                    outline = transform_points(pose, board.outline)
-                    if _line_of_sight(static_scene, chosen, outline):
-                        best, best_score = (pose, spot, heading), score
-        if best is not None:
-            steps.append(BoardStep("hold", best[0], best[1], best[2], subset))
+        normals = sum(
+            (v.world_T_camera[:3, 3] - centers)
+            / np.linalg.norm(v.world_T_camera[:3, 3] - centers, axis=1, keepdims=True)
+            for v in chosen
+        )
+        horizontal = normals[:, :2] / np.maximum(
+            np.linalg.norm(normals[:, :2], axis=1, keepdims=True), 1e-9
+        )
+        spots = centers[:, :2] - params.carry_distance * horizontal
+        usable = venue.is_free(spots, body_radius + params.spot_clearance)
+        rotations = _facing_rotations(normals)
+        sizes = np.stack(
+            [_square_pixels(v, rotations, centers, board, params, False) for v in chosen]
+        )
+        score = np.minimum(sizes, params.square_px_wanted).min(axis=0) / params.square_px_wanted
+        score -= params.height_preference * np.abs(centers[:, 2] - params.carry_height)
+        score[~usable | (sizes.min(axis=0) <= 0)] = -np.inf
+        for best in np.argsort(-score):
+            if not np.isfinite(score[best]):
+                break
+            pose = make_pose(rotations[best], centers[best] - rotations[best] @ board.center)
+            if _line_of_sight(static_scene, chosen, transform_points(pose, board.outline)):
+                heading = math.atan2(horizontal[best, 1], horizontal[best, 0])
+                steps.append(BoardStep("hold", pose, spots[best], heading, subset))
+                break
 
-    # Floor placements: flat, seen by as many sensors as possible, spread out.
-    candidates = []
-    for xy in grid[:: max(1, int(round(0.5 / step)))]:
-        # x along the room's y axis for sensors looking along x, and so on.
-        center = np.array([xy[0], xy[1], float(params.thickness)])
-        pose = board_pose_facing(center, [0.0, 0.0, 1.0], board)
-        if not venue.is_free(xy[None], max(board.hi - board.lo) / 2 + 0.1)[0]:
-            continue
-        seeing = [
-            k for k, v in enumerate(views) if _views_board(v, pose, board, params, floor=True) > 0
-        ]
-        if not seeing:
-            continue
-        outline = transform_points(pose, board.outline)
-        seeing = [k for k in seeing if _line_of_sight(static_scene, [views[k]], outline)]
-        if seeing:
-            candidates.append((len(seeing), pose, tuple(seeing), xy))
+    # Lying on the floor, seen by as many sensors as possible, spread out.
+    floor = grid[
+        venue.is_free(grid, float(np.max(board.hi - board.lo)) / 2 + params.spot_clearance)
+    ]
+    centers = np.column_stack([floor, np.full(len(floor), float(params.thickness))])
+    rotations = _facing_rotations(np.tile([0.0, 0.0, 1.0], (len(floor), 1)))
+    seen = np.stack([_square_pixels(v, rotations, centers, board, params, True) > 0 for v in views])
+    order = np.lexsort((np.arange(len(floor)), -seen.sum(axis=0)))
     chosen_xy: list[np.ndarray] = []
-    candidates.sort(key=lambda c: -c[0])
-    for count, pose, seeing, xy in candidates:
-        if len(chosen_xy) >= spec.floor_placements:
+    for c in order:
+        if len(chosen_xy) >= spec.floor_placements or not seen[:, c].any():
             break
+        xy = floor[c]
         if any(np.linalg.norm(xy - other) < params.floor_spacing for other in chosen_xy):
             continue
-        # Stand beside the board, away from the sensors that see it.
-        away = -sum(
-            (views[k].world_T_camera[:2, 3] - xy)
-            / np.linalg.norm(views[k].world_T_camera[:2, 3] - xy)
-            for k in seeing
+        pose = make_pose(rotations[c], centers[c] - rotations[c] @ board.center)
+        outline = transform_points(pose, board.outline)
+        seeing = tuple(
+            k
+            for k in np.flatnonzero(seen[:, c])
+            if _line_of_sight(static_scene, [views[k]], outline)
         )
-        angle0 = math.atan2(away[1], away[0]) if np.linalg.norm(away) > 1e-6 else 0.0
-        spot = None
-        for delta in np.radians([0, 45, -45, 90, -90, 135, -135, 180]):
-            angle = angle0 + delta
-            candidate = xy + params.step_aside * np.array([math.cos(angle), math.sin(angle)])
-            if venue.is_free(candidate[None], body_radius + 0.05)[0]:
-                spot = candidate
-                break
+        if not seeing:
+            continue
+        spot = _step_aside(venue, xy, [views[k] for k in seeing], params, body_radius)
         if spot is None:
             continue
-        heading = math.atan2(xy[1] - spot[1], xy[0] - spot[0])
         chosen_xy.append(xy)
-        steps.append(BoardStep("floor", pose, spot, heading, seeing))
+        heading = math.atan2(xy[1] - spot[1], xy[0] - spot[0])
+        steps.append(BoardStep("floor", pose, spot, heading, tuple(int(k) for k in seeing)))
     return steps
+
+
+def _step_aside(
+    venue: Venue, xy: np.ndarray, views: list[SensorView], params: Params, body_radius: float
+) -> np.ndarray | None:
+    """Where the operator stands beside a board on the floor: away from the sensors
+    that see it, on free floor."""
+    away = -sum(
+        (v.world_T_camera[:2, 3] - xy) / np.linalg.norm(v.world_T_camera[:2, 3] - xy) for v in views
+    )
+    angle0 = math.atan2(away[1], away[0]) if np.linalg.norm(away) > 1e-6 else 0.0
+    for delta in np.radians([0, 45, -45, 90, -90, 135, -135, 180]):
+        candidate = xy + params.step_aside * np.array(
+            [math.cos(angle0 + delta), math.sin(angle0 + delta)]
+        )
+        if venue.is_free(candidate[None], body_radius + params.spot_clearance)[0]:
+            return candidate
+    return None
 
 
 class Operator(Behaviour):
@@ -426,6 +498,7 @@ class Operator(Behaviour):
         self.from_pose: np.ndarray | None = None
         self.pose_now: np.ndarray | None = None
         self.on_floor = False
+        self.best, self.best_t = math.inf, 0.0
 
     def start(self, crowd: Crowd, i: int) -> np.ndarray:
         return self.start_point.copy()
@@ -452,8 +525,12 @@ class Operator(Behaviour):
         elapsed = t - self.phase_start
         if self.phase == "walk":
             self.pose_now = self._carry_pose(crowd, i)
-            if np.linalg.norm(crowd.pos[i] - step.operator_spot) < crowd.params.arrive_radius * 0.5:
-                self._enter(step.kind == "floor" and "lay" or "raise", t, self.pose_now)
+            distance = float(np.linalg.norm(crowd.pos[i] - step.operator_spot))
+            if distance < self.best - PROGRESS:
+                self.best, self.best_t = distance, t
+            stuck = t - self.best_t > crowd.params.stuck_seconds
+            if distance < crowd.params.arrive_radius or stuck:
+                self._enter("lay" if step.kind == "floor" else "raise", t, self.pose_now)
                 return None, 0.0
             return step.operator_spot, speed
         if self.phase in ("raise", "lay"):
@@ -488,6 +565,7 @@ class Operator(Behaviour):
         return None, 0.0
 
     def _enter(self, phase: str, t: float, pose: np.ndarray | None) -> None:
+        self.best, self.best_t = math.inf, t
         self.phase, self.phase_start, self.from_pose = (
             phase,
             t,
@@ -506,11 +584,16 @@ class Operator(Behaviour):
     def wrists(self, crowd: Crowd, i: int, t: float) -> np.ndarray | None:
         if self.pose_now is None or self.on_floor or self.phase in ("lay", "pickup"):
             return None
+        # Hands grip the side edges from behind the board, clear of the printed face.
         mid = (self.board.lo[1] + self.board.hi[1]) / 2
-        edges = np.array([[self.board.hi[0], mid, 0.0], [self.board.lo[0], mid, 0.0]])
+        behind = float(self.params.thickness + self.params.grip_depth)
+        edges = np.array([[self.board.hi[0], mid, behind], [self.board.lo[0], mid, behind]])
         return transform_points(self.pose_now, edges)
 
-    def board_pose(self) -> np.ndarray | None:
+    def board_pose(self, crowd: Crowd, i: int) -> np.ndarray:
+        """``world_T_board`` now (in the operator's hands before the first step)."""
+        if self.pose_now is None:
+            self.pose_now = self._carry_pose(crowd, i)
         return self.pose_now
 
     def planned_seconds(self, start: np.ndarray) -> float:

@@ -88,7 +88,7 @@ BODY_PARAMS = register(
                 "Speed at which the gait reaches full amplitude.",
             ),
             Param("sway_m", 0.015, 0, 0.1, 0.005, "m", "Sideways sway of a standing person."),
-            Param("limb_segments", 8, 4, 32, 1, "", "Facets around each limb cylinder."),
+            Param("limb_segments", 6, 4, 32, 1, "", "Facets around each limb cylinder."),
             Param("head_resolution", 5, 3, 20, 1, "", "Resolution of the head ellipsoid mesh."),
         ],
         help="The simulated people's body shape and walking gait.",
@@ -332,11 +332,11 @@ class BodyModel:
                 dist = min(max(dist, abs(a - b) + 1e-3), a + b - 1e-3)
                 axis = reach / max(np.linalg.norm(reach), 1e-9)
                 cos_a = (a * a + dist * dist - b * b) / (2 * a * dist)
-                # The elbow bends in the plane of the reach and "down and outwards".
+                # The elbow bends in the plane of the reach, down, out and back.
                 side_dir = world[person, J[f"shoulder_{side}"]] - world[person, J["neck"]]
-                hint = np.array([0.0, 0.0, -1.0]) + 0.5 * side_dir / max(
-                    np.linalg.norm(side_dir), 1e-9
-                )
+                side_dir /= max(np.linalg.norm(side_dir), 1e-9)
+                back = np.cross(side_dir, [0.0, 0.0, 1.0]) * (1.0 if side == "l" else -1.0)
+                hint = np.array([0.0, 0.0, -1.0]) + 0.5 * side_dir + 0.5 * back
                 ortho = hint - (hint @ axis) * axis
                 ortho /= max(np.linalg.norm(ortho), 1e-9)
                 elbow = shoulder + a * (cos_a * axis + np.sqrt(max(1 - cos_a**2, 0.0)) * ortho)

@@ -34,7 +34,7 @@ CROWD_PARAMS = register(
         "sim_crowd",
         [
             Param(
-                "time_step", 0.02, 0.002, 0.1, 0.002, "s", "Fixed step of the people simulation."
+                "time_step", 0.04, 0.002, 0.1, 0.002, "s", "Fixed step of the people simulation."
             ),
             Param("adult_height_mean", 1.72, 1.5, 2.0, 0.01, "m", "Mean adult height."),
             Param("adult_height_std", 0.09, 0.0, 0.3, 0.01, "m", "Spread of adult heights."),
@@ -97,6 +97,24 @@ CROWD_PARAMS = register(
                 0.05,
                 "",
                 "Social force: weight of people behind (0 ignores them).",
+            ),
+            Param(
+                "min_separation",
+                0.4,
+                0.0,
+                1.0,
+                0.01,
+                "m",
+                "People's centres never come closer than this.",
+            ),
+            Param(
+                "obstacle_overlap",
+                0.8,
+                0.0,
+                1.0,
+                0.05,
+                "",
+                "Fraction of the body radius kept clear of obstacles.",
             ),
             Param("body_radius", 0.25, 0.1, 0.5, 0.01, "m", "Radius of a walker's footprint."),
             Param(
@@ -182,6 +200,7 @@ CROWD_PARAMS = register(
     )
 )
 
+CROSSING_TRIES = 50  # random orientations tried for a crossing pair's routes
 SKIN_TONES = (
     (0.93, 0.76, 0.64),
     (0.85, 0.64, 0.5),
@@ -496,10 +515,23 @@ class Crowd:
                 [(self.area[0] + self.area[2]) / 2, (self.area[1] + self.area[3]) / 2]
             )
             reach = 0.4 * min(self.area[2] - self.area[0], self.area[3] - self.area[1])
-            angle = rng.uniform(0, math.pi)
-            for turn in (0.0, math.pi / 2 + rng.uniform(-0.6, 0.6)):
-                d = reach * np.array([math.cos(angle + turn), math.sin(angle + turn)])
-                self.add(Route(np.array([center + d, center - d])), child=child())
+            # Two routes across the centre at about right angles, ends on free floor.
+            best, best_clearance = None, -math.inf
+            for _ in range(CROSSING_TRIES):
+                angle = rng.uniform(0, math.pi)
+                turn = math.pi / 2 + rng.uniform(-0.6, 0.6)
+                ends = [
+                    reach * np.array([math.cos(angle + a), math.sin(angle + a)])
+                    for a in (0.0, turn)
+                ]
+                points = np.array([center + e for e in ends] + [center - e for e in ends])
+                clearance = float(self.venue.clearance(points).min())
+                if clearance > best_clearance:
+                    best, best_clearance = ends, clearance
+                if clearance >= p.goal_clearance:
+                    break
+            for end in best:
+                self.add(Route(np.array([center + end, center - end])), child=child())
             left = count - added()
         doors = self.venue.doors
         for k in range(min(spec.enter_leave, left)):
@@ -553,7 +585,30 @@ class Crowd:
             facing = person.behaviour.facing(self, i, 0.0)
             if facing is not None:
                 self.heading[i] = facing
+        here = np.flatnonzero(self.present)
+        self.pos[here] = self._resolve(self.pos[here])
         self._started = True
+
+    def _resolve(self, pos: np.ndarray) -> np.ndarray:
+        """Hard constraints after the forces: people never overlap (pairs closer than
+        ``min_separation`` are pushed apart equally) and never stand inside furniture or
+        walls (pushed out along the nearest obstacle's normal)."""
+        p = self.params
+        pos = pos.copy()
+        if len(pos) > 1:
+            delta = pos[:, None, :] - pos[None, :, :]
+            d = np.linalg.norm(delta, axis=2)
+            np.fill_diagonal(d, np.inf)
+            overlap = np.maximum(p.min_separation - d, 0.0)
+            if overlap.any():
+                away = delta / np.maximum(d, 1e-9)[..., None]
+                pos += 0.5 * np.sum(overlap[..., None] * away, axis=1)
+        distance, normal = self.venue.distances(pos)
+        nearest = np.argmin(distance, axis=1)
+        depth = p.body_radius * p.obstacle_overlap - distance[np.arange(len(pos)), nearest]
+        inside = depth > 0
+        pos[inside] += normal[np.flatnonzero(inside), nearest[inside]] * depth[inside, None]
+        return pos
 
     def advance(self, t: float) -> None:
         """Step the simulation forward to time ``t`` (seconds; never backwards)."""
@@ -618,12 +673,7 @@ class Crowd:
         norm = np.linalg.norm(vel, axis=1)
         vel *= np.minimum(1.0, top / np.maximum(norm, 1e-9))[:, None]
         pos = pos + vel * dt
-        # Never inside an obstacle: push out along the nearest obstacle's normal.
-        od, on = self.venue.distances(pos)
-        nearest = np.argmin(od, axis=1)
-        depth = p.body_radius * 0.8 - od[np.arange(len(idx)), nearest]
-        inside = depth > 0
-        pos[inside] += on[np.flatnonzero(inside), nearest[inside]] * depth[inside, None]
+        pos = self._resolve(pos)
         self.pos[idx], self.vel[idx] = pos, vel
         # Body heading, gait phase and amplitude.
         speed = np.linalg.norm(vel, axis=1)
@@ -644,15 +694,29 @@ class Crowd:
         self.amp[idx] += (target_amp - self.amp[idx]) * min(1.0, dt / p.relax_time)
 
     # ------------------------------------------------------------- reading
-    def state(self) -> CrowdState:
-        """The present people now, as a :class:`CrowdState`."""
+    def state(self, t: float | None = None) -> CrowdState:
+        """The present people at time ``t`` (default: the last step), which must lie within
+        one step after the last one: positions and gait phases are carried forward from
+        the last step at its velocities, so that states are exact in time although the
+        dynamics advance in fixed steps."""
         if not self._started:
             self._start()
+        t = self.t if t is None else float(t)
+        ahead = t - self.t
+        if not -1e-9 <= ahead <= float(self.params.time_step) + 1e-9:
+            raise ValueError(
+                f"crowd state at t={t:.4f} s asked while the crowd is at {self.t:.4f} s."
+            )
         idx = np.flatnonzero(self.present)
+        position = self.pos[idx] + self.vel[idx] * ahead
+        speed = np.linalg.norm(self.vel[idx], axis=1)
+        heights = np.array([self.people[i].height for i in idx])
+        stride = self.body_params.stride_per_height * heights
+        phase = self.phase[idx] + 2 * math.pi * speed * ahead / np.maximum(stride, 1e-9)
         sway_m = float(self.body_params.sway_m)
         sway = (
             sway_m
-            * np.sin(0.5 * math.pi * self.t + self.sway_phase[idx])
+            * np.sin(0.5 * math.pi * t + self.sway_phase[idx])
             * np.clip(1.0 - self.amp[idx], 0, 1)
         )
         wrists = np.full((len(idx), 2, 3), np.nan)
@@ -660,16 +724,16 @@ class Crowd:
             target = self.people[i].behaviour.wrists(self, i, self.t)
             if target is not None:
                 wrists[k] = target
+        if np.isfinite(wrists).any():
+            wrists += np.append(self.vel[idx] * ahead, np.zeros((len(idx), 1)), axis=1)[:, None, :]
         pose = BodyPose(
-            x=self.pos[idx, 0].copy(),
-            y=self.pos[idx, 1].copy(),
+            x=position[:, 0],
+            y=position[:, 1],
             heading=self.heading[idx].copy(),
-            height=np.array([self.people[i].height for i in idx]),
-            phase=self.phase[idx].copy(),
+            height=heights,
+            phase=phase,
             amplitude=self.amp[idx].copy(),
             sway=sway,
             wrist_targets=wrists if np.isfinite(wrists).any() else None,
         )
-        return CrowdState(
-            self.t, np.array([self.people[i].id for i in idx], dtype=np.int64), idx, pose
-        )
+        return CrowdState(t, np.array([self.people[i].id for i in idx], dtype=np.int64), idx, pose)

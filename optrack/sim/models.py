@@ -124,17 +124,24 @@ def expose_color(
 
 
 def flying_pixels(
-    z: np.ndarray, far: float, threshold: float, probability: float, rng: np.random.Generator
+    z: np.ndarray,
+    far: float,
+    threshold: float,
+    relative: float,
+    probability: float,
+    rng: np.random.Generator,
 ) -> np.ndarray:
-    """Time-of-flight mixed pixels: where a 3x3 neighbourhood spans a depth edge wider
-    than ``threshold``, a pixel (with ``probability``) returns a depth between the
-    foreground and the background (Lefloch et al., "Technical foundation and
-    calibration methods for time-of-flight cameras", LNCS 8200, 2013, section 4).
-    No return (inf) counts as ``far``."""
+    """Time-of-flight mixed pixels: where a 3x3 neighbourhood spans a depth jump wider
+    than ``threshold`` metres and ``relative`` times its nearest depth (a discontinuity,
+    not a steep but continuous surface such as a far floor), a pixel (with
+    ``probability``) returns a depth between the foreground and the background
+    (Lefloch et al., "Technical foundation and calibration methods for time-of-flight
+    cameras", LNCS 8200, 2013, section 4). No return (inf) counts as ``far``."""
     finite = np.minimum(z, np.float32(far))
     high = cv2.dilate(finite, _KERNEL3)
     low = cv2.erode(finite, _KERNEL3)
-    edges = np.flatnonzero(cv2.subtract(high, low) > threshold)
+    jump = cv2.subtract(high, low)
+    edges = np.flatnonzero((jump > threshold) & (jump > np.float32(relative) * low))
     chosen = edges[rng.random(len(edges)) < probability]
     if len(chosen) == 0:
         return z
@@ -398,6 +405,15 @@ KINECT2_PARAMS = register(
                 "Depth jump that makes an edge for mixed pixels.",
             ),
             Param(
+                "flying_relative",
+                0.05,
+                0.0,
+                1.0,
+                0.01,
+                "",
+                "The jump must also exceed this fraction of the nearer depth.",
+            ),
+            Param(
                 "flying_probability",
                 0.5,
                 0.0,
@@ -477,7 +493,9 @@ class TimeOfFlight(SensorModel):
         if noise:
             sigma = self.per_pixel(render, "sigma", self._sigma_of_valid)
             z = z + sigma * gaussian(z.shape, rng)
-            z = flying_pixels(z, 2 * p.max_range, p.flying_threshold, p.flying_probability, rng)
+            z = flying_pixels(
+                z, 2 * p.max_range, p.flying_threshold, p.flying_relative, p.flying_probability, rng
+            )
             amplitude += p.ir_noise * np.sqrt(amplitude) * gaussian(z.shape, rng)
         valid &= self.in_range(z)
         amplitude = np.clip(amplitude, 0, UINT16_MAX)
@@ -582,6 +600,15 @@ SR4500_PARAMS = register(
                 0.01,
                 "m",
                 "Depth jump that makes an edge for mixed pixels.",
+            ),
+            Param(
+                "flying_relative",
+                0.05,
+                0.0,
+                1.0,
+                0.01,
+                "",
+                "The jump must also exceed this fraction of the nearer depth.",
             ),
             Param(
                 "flying_probability",
@@ -710,7 +737,7 @@ STEREO_PARAMS = register(
             Param("block_size", 9, 3, 31, 2, "px", "Matching window size."),
             Param(
                 "texture_snr",
-                2.0,
+                1.0,
                 0.0,
                 20.0,
                 0.1,

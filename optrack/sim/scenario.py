@@ -86,6 +86,7 @@ class Pillar(_Spec, tag="pillar", tag_field="kind"):
     at: Vec2
     radius: float = 0.2
     color: Color = (0.78, 0.77, 0.74)
+    texture: float = 0.25
 
 
 class Table(_Spec, tag="table", tag_field="kind"):
@@ -96,6 +97,7 @@ class Table(_Spec, tag="table", tag_field="kind"):
     height: float = 0.75
     yaw_deg: float = 0.0
     color: Color = (0.55, 0.38, 0.24)
+    texture: float = 0.25
 
 
 class Box(_Spec, tag="box", tag_field="kind"):
@@ -105,6 +107,7 @@ class Box(_Spec, tag="box", tag_field="kind"):
     size: Vec3 = (0.6, 0.4, 0.5)
     yaw_deg: float = 0.0
     color: Color = (0.62, 0.52, 0.36)
+    texture: float = 0.25
 
 
 class Partition(_Spec, tag="partition", tag_field="kind"):
@@ -115,6 +118,7 @@ class Partition(_Spec, tag="partition", tag_field="kind"):
     height: float = 1.8
     thickness: float = 0.06
     color: Color = (0.35, 0.45, 0.6)
+    texture: float = 0.25
 
 
 Obstacle = Pillar | Table | Box | Partition
@@ -148,8 +152,9 @@ class VenueSpec(_Spec):
     lighting: Lighting = msgspec.field(default_factory=Lighting)
     floor_color: Color = (0.52, 0.5, 0.47)
     wall_color: Color = (0.86, 0.85, 0.82)
-    floor_texture: float = 0.3
+    floor_texture: float = 0.15
     wall_texture: float = 0.0
+    texture_cell: float = 0.02
 
 
 class SensorPose(_Spec):
@@ -240,7 +245,7 @@ def _field_error(path: Path, error: msgspec.ValidationError) -> ScenarioError:
     if " - at `$" in message:
         message, _, location = message.partition(" - at `$")
         where = location.rstrip("`").lstrip(".")
-    message = message.replace("`", "").rstrip(".")
+    message = message.replace("`", "'").replace("Object contains unknown", "unknown").rstrip(".")
     if message:
         message = message[0].lower() + message[1:]
     field = f" field '{where}'" if where else ""
@@ -299,6 +304,8 @@ def _finite(values: object) -> bool:
         return math.isfinite(values)
     if isinstance(values, tuple | list):
         return all(_finite(v) for v in values)
+    if isinstance(values, dict):
+        return all(_finite(v) for v in values.values())
     return True
 
 
@@ -328,21 +335,25 @@ def check_scenario(scenario: Scenario) -> None:
         points = [obstacle.start, obstacle.to] if isinstance(obstacle, Partition) else [obstacle.at]
         if not all(_inside(scenario, p) for p in points):
             raise _fail(scenario, f"{where} is outside the {length} x {width} m room")
-        sizes: list[float] = []
+        # (horizontal sizes, heights) of the obstacle
         if isinstance(obstacle, Pillar):
-            sizes = [obstacle.radius]
+            flat, tall = [2 * obstacle.radius], []
         elif isinstance(obstacle, Table):
-            sizes = [*obstacle.size, obstacle.height]
+            flat, tall = list(obstacle.size), [obstacle.height]
         elif isinstance(obstacle, Box):
-            sizes = list(obstacle.size)
+            flat, tall = list(obstacle.size[:2]), [obstacle.size[2]]
         else:
-            sizes = [obstacle.height, obstacle.thickness]
+            flat, tall = [obstacle.thickness], [obstacle.height]
             if math.dist(obstacle.start, obstacle.to) < 0.1:
                 raise _fail(scenario, f"{where} must be at least 0.1 m long")
-        if not all(0.0 < s <= venue.wall_height for s in sizes):
-            raise _fail(scenario, f"{where} sizes must be positive and below the ceiling")
+        if not all(0.0 < s <= max(length, width) for s in flat):
+            raise _fail(scenario, f"{where} sizes must be positive and fit in the room")
+        if not all(0.0 < s <= venue.wall_height for s in tall):
+            raise _fail(scenario, f"{where} height must be positive and below the ceiling")
         if not all(0.0 <= c <= 1.0 for c in obstacle.color):
             raise _fail(scenario, f"{where} color must be three numbers 0-1")
+        if not 0.0 <= obstacle.texture <= 1.0:
+            raise _fail(scenario, f"{where} texture must be 0-1 (relative albedo variation)")
     sensors = scenario.sensors
     if not 1 <= sensors.count <= 16:
         raise _fail(scenario, f"sensors.count must be 1-16; got {sensors.count}")

@@ -25,6 +25,9 @@ DOOR_INSET = 0.4  # where people appear and vanish, inside the door, m
 TABLE_TOP = 0.04  # m
 TABLE_LEG = 0.05  # m
 PILLAR_SEGMENTS = 16
+# Near-infrared (~850 nm) albedos: painted walls and ceilings reflect strongly, floors and
+# furniture less.
+FLOOR_INFRARED, WALL_INFRARED, FURNITURE_INFRARED = 0.5, 0.75, 0.6
 
 
 def _box(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -56,8 +59,10 @@ class Venue:
         self._material: list[np.ndarray] = []
         self._count = 0
         materials = [
-            Material("floor", spec.floor_color, 0.5, spec.floor_texture, 0.05),
-            Material("wall", spec.wall_color, 0.75, spec.wall_texture, 0.05),
+            Material(
+                "floor", spec.floor_color, FLOOR_INFRARED, spec.floor_texture, spec.texture_cell
+            ),
+            Material("wall", spec.wall_color, WALL_INFRARED, spec.wall_texture, spec.texture_cell),
         ]
         circles: list[tuple[float, float, float]] = []
         rects: list[tuple[float, float, float, float, float]] = []
@@ -65,7 +70,11 @@ class Venue:
         for obstacle in spec.obstacles:
             index = len(materials)
             name = type(obstacle).__name__.lower()
-            materials.append(Material(name, obstacle.color, 0.6, 0.25, 0.04))
+            materials.append(
+                Material(
+                    name, obstacle.color, FURNITURE_INFRARED, obstacle.texture, spec.texture_cell
+                )
+            )
             if isinstance(obstacle, Pillar):
                 self._pillar(obstacle, index)
                 circles.append((*obstacle.at, obstacle.radius))

@@ -280,7 +280,7 @@ class Simulation:
         )
         start = steps[0].operator_spot if steps else np.zeros(2)
         self.operator = Operator(steps, self.board, start)
-        self.crowd.add(self.operator)
+        self.operator_index = self.crowd.add(self.operator)
         if seconds is None:
             self.seconds = max(self.seconds, self.operator.planned_seconds(start))
 
@@ -292,11 +292,16 @@ class Simulation:
                 f"the simulation is at t={self.crowd.t:.3f} s and cannot go back to t={t:.3f} s."
             )
         self.crowd.advance(t)
-        state = self.crowd.state()
+        state = self.crowd.state(t)
         joints = self.body.joints(state.pose)
         vertices = self.body.vertices(joints, state.pose)
-        board_pose = self.operator.board_pose() if self.operator is not None else None
-        on_floor = bool(self.operator is not None and self.operator.on_floor)
+        board_pose = None
+        on_floor = False
+        if self.operator is not None:
+            board_pose = self.operator.board_pose(self.crowd, self.operator_index).copy()
+            on_floor = self.operator.on_floor
+            if not on_floor:  # carried along with the operator since the last step
+                board_pose[:2, 3] += self.crowd.vel[self.operator_index] * (t - self.crowd.t)
         geometry = self._geometry(state, vertices, board_pose)
         return WorldState(t, state, joints, vertices, board_pose, on_floor, geometry)
 
@@ -331,7 +336,7 @@ class Simulation:
             self._layout_key = key
         triangles, material, owner, texture, table = self._layout
         flat = vertices.reshape(-1, 3)
-        boxes = [np.stack([v.min(axis=0), v.max(axis=0)]) for v in vertices]
+        boxes = list(np.stack([vertices.min(axis=1), vertices.max(axis=1)], axis=1))
         part_boxes = [body.part_boxes(vertices)] if count else []
         if with_board:
             board_vertices = transform_points(board_pose, self.board.vertices)

@@ -14,6 +14,7 @@ tracks for a while, so that a lost identity can be given back.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections import deque
 from collections.abc import Sequence
 
@@ -114,18 +115,19 @@ class OnlineBoostedClassifier:
         if self.count[0] == 0:
             return  # no negatives yet: nothing to discriminate
         correct = self.weak(f) == y
+        hit = correct.astype(np.float64)
+        miss = 1.0 - hit
+        lambda_correct, lambda_wrong = self.lambda_correct, self.lambda_wrong
         importance = 1.0
-        used = np.zeros(len(correct), dtype=bool)
         for s in range(self.selected.size):
-            self.lambda_correct[s] += importance * correct
-            self.lambda_wrong[s] += importance * ~correct
-            error = self.lambda_wrong[s] / (self.lambda_correct[s] + self.lambda_wrong[s])
-            error = np.where(used, np.inf, error)
-            best = int(np.argmin(error))
-            e = float(np.clip(error[best], ERROR_FLOOR, 1.0 - ERROR_FLOOR))
+            lambda_correct[s] += importance * hit
+            lambda_wrong[s] += importance * miss
+            error = lambda_wrong[s] / (lambda_correct[s] + lambda_wrong[s])
+            error[self.selected[:s]] = np.inf  # each selector takes a weak learner of its own
+            best = int(error.argmin())
+            e = min(max(float(error[best]), ERROR_FLOOR), 1.0 - ERROR_FLOOR)
             self.selected[s] = best
-            used[best] = True
-            self.alpha[s] = 0.5 * np.log((1.0 - e) / e) if e < 0.5 else 0.0
+            self.alpha[s] = 0.5 * math.log((1.0 - e) / e) if e < 0.5 else 0.0
             importance *= 1.0 / (2.0 * (1.0 - e)) if correct[best] else 1.0 / (2.0 * e)
 
 
@@ -192,7 +194,8 @@ class AppearanceModel:
         """Teach a track its own features f and others' (rows of ``others``), rate-limited.
 
         Negatives are the other detections of the batch, topped up from the
-        bank of other people's recent histograms. Returns True when it learned.
+        bank of other people's recent histograms, and random colour histograms
+        (people in general). Returns True when it learned.
         """
         if not np.all(np.isfinite(f)):
             return False
@@ -209,6 +212,14 @@ class AppearanceModel:
             if pool:
                 picks = self.rng.choice(len(pool), size=min(missing, len(pool)), replace=False)
                 negatives.extend(pool[i] for i in picks)
+        generic = self.params.generic_negatives
+        if generic:
+            assert self.pool is not None
+            bins = self.pool.boxes.shape[1]
+            random_histograms = self.rng.dirichlet(
+                np.full(bins, self.params.generic_concentration), size=generic
+            )
+            negatives.extend(self.pool(random_histograms))
         classifier = self.classifier(track_id)
         for g in negatives:
             classifier.learn(g, positive=False)

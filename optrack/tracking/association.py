@@ -34,6 +34,7 @@ __all__ = [
     "UNMEASURED_VARIANCE",
     "assign",
     "association_cost",
+    "extrapolate_late",
     "gate_value",
     "mahalanobis",
     "measurement_noise",
@@ -72,18 +73,44 @@ def measurements(
     return z
 
 
-def measurement_noise(position_var: np.ndarray, baseline: np.ndarray) -> np.ndarray:
+def extrapolate_late(
+    z: np.ndarray,
+    R: np.ndarray,
+    lag: np.ndarray,
+    x: np.ndarray,
+    P: np.ndarray,
+    spectral_density: float,
+) -> None:
+    """Carry detections ``lag`` (N,) seconds forward to each track's time, in place.
+
+    A late batch's position is moved along the track's velocity ``x[:, 2:4]``;
+    its variance grows by the velocity's uncertainty over the lag and by the
+    process noise (an out-of-sequence measurement handled by extrapolation).
+    """
+    z[:, :, 0:2] += lag[:, None, None] * x[:, None, 2:4]
+    for axis in (0, 1):
+        extra = lag**2 * P[:, axis + 2, axis + 2] + spectral_density * lag**3 / 3.0
+        R[:, :, axis, axis] += extra[:, None]
+
+
+def measurement_noise(
+    position_var: np.ndarray, baseline: np.ndarray, spectral_density: float = 0.0
+) -> np.ndarray:
     """Diagonal R for every pair, (N, M, 4, 4).
 
     Position: the detection's variance. Velocity: a difference of two
-    positions over the baseline, ``2 * var / baseline^2``.
+    positions over the baseline, ``2 * var / baseline^2``, plus how far the
+    mean velocity over the baseline strays from the velocity at its end under
+    white-noise acceleration, ``q * baseline / 3``.
     """
     n, m = len(baseline), len(position_var)
     R = np.zeros((n, m, DIM_Z, DIM_Z))
     measured = np.isfinite(baseline)
     safe = np.where(measured, baseline, 1.0)
     velocity_var = np.where(
-        measured[:, None], 2.0 * position_var[None, :] / safe[:, None] ** 2, UNMEASURED_VARIANCE
+        measured[:, None],
+        2.0 * position_var[None, :] / safe[:, None] ** 2 + spectral_density * safe[:, None] / 3.0,
+        UNMEASURED_VARIANCE,
     )
     for axis in (0, 1):
         R[:, :, axis, axis] = position_var[None, :]

@@ -18,7 +18,15 @@ import numpy as np
 from optrack.params import Params
 from optrack.types import TrackStatus
 
-__all__ = ["Fate", "TrackState", "advance", "on_detected", "record_position"]
+__all__ = [
+    "Fate",
+    "TrackState",
+    "advance",
+    "on_detected",
+    "record_position",
+    "reference_position",
+    "seen_near",
+]
 
 
 class Fate(enum.Enum):
@@ -89,9 +97,11 @@ def advance(track: TrackState, now: float, params: Params) -> Fate:
 
 
 def record_position(track: TrackState, t: float, keep: float) -> None:
-    """Add the filtered position at t to the history (in time order); forget entries
-    older than ``keep`` seconds before the newest, keeping one such entry."""
-    entry = (t, float(track.x[0]), float(track.x[1]))
+    """Add the filtered position at t (the state carried back from its own time if t is
+    earlier) to the history, in time order; forget entries older than ``keep`` seconds
+    before the newest, keeping one such entry."""
+    x, y = track.position_at(t)
+    entry = (t, x, y)
     history = track.history
     if not history or t >= history[-1][0]:
         history.append(entry)
@@ -117,3 +127,14 @@ def reference_position(track: TrackState, t: float, baseline: float) -> tuple[fl
         return 0.0, 0.0, float("nan")
     ht, hx, hy = history[k]
     return hx, hy, t - ht
+
+
+def seen_near(track: TrackState, t: float) -> tuple[float, float, float]:
+    """Where the track was detected closest before t (or first, for t before its history),
+    and how long before (or after) t: (x, y, |dt|)."""
+    history = track.history
+    if not history:
+        return float(track.x[0]), float(track.x[1]), abs(t - track.t)
+    k = bisect.bisect_right(history, (t, np.inf, np.inf)) - 1
+    ht, hx, hy = history[max(k, 0)]
+    return hx, hy, abs(t - ht)

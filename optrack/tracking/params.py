@@ -296,6 +296,22 @@ APPEARANCE_PARAMS = register(
                 help="Negative examples (other people) per learning step.",
             ),
             Param(
+                "generic_negatives",
+                2,
+                min=0,
+                max=100,
+                step=1,
+                help="Random colour histograms added as negatives to each learning step, so a "
+                "classifier rejects colours it has never seen, not only the people around.",
+            ),
+            Param(
+                "generic_concentration",
+                0.05,
+                min=0.001,
+                max=10.0,
+                help="Dirichlet concentration of the random negatives (small: few colours each).",
+            ),
+            Param(
                 "negative_memory",
                 10.0,
                 min=0.1,

@@ -14,11 +14,11 @@ OpenPTrack's ``Tracker::updateTracks``:
    over, gives a recently lost identity back to a new track its classifier
    recognises, and runs the life-cycle (:mod:`.lifecycle`).
 
-A batch up to ``max_detection_delay`` behind the newest one is used: tracks
-are retrodicted to its stamp for association and update, and the update is
-carried forward to the track's own time (an out-of-sequence measurement,
-approximated as Bar-Shalom's one-step retrodiction). Older batches are
-dropped and counted in :meth:`Tracker.status`.
+A batch up to ``max_detection_delay`` behind the newest one is used: its
+detections are carried forward to each track's own time along the track's
+velocity, with the noise that adds (an out-of-sequence measurement by
+measurement extrapolation), so the tracks' states never go back in time.
+Older batches are dropped and counted in :meth:`Tracker.status`.
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ from optrack.tracking.appearance import AppearanceModel
 from optrack.tracking.association import (
     assign,
     association_cost,
+    extrapolate_late,
     gate_value,
     mahalanobis,
     measurement_noise,
@@ -49,6 +50,7 @@ from optrack.tracking.lifecycle import (
     on_detected,
     record_position,
     reference_position,
+    seen_near,
 )
 from optrack.tracking.motion import ConstantVelocityUKF, position_variance
 from optrack.tracking.params import APPEARANCE_PARAMS, TRACKING_PARAMS
@@ -172,12 +174,14 @@ class Tracker:
         confidence = np.array([d.confidence for d in detections], dtype=np.float64)
         position_var = position_variance(_sensor_distances(detections), p)
         appearance = self.appearance_enabled
+        # an occluded detection's colours are partly someone else's: no appearance for it
         features = (
-            self.appearance.features([d.histogram for d in detections])
+            self.appearance.features([[] if d.occluded else d.histogram for d in detections])
             if appearance and m
             else None
         )
 
+        self._advance(self.clock)  # tracks whose time is up take no more detections
         taken = np.zeros(m, dtype=bool)
         if self.tracks and m:
             taken = self._associate(
@@ -206,27 +210,36 @@ class Tracker:
         X = np.array([tr.x for tr in tracks])
         P = np.array([tr.P for tr in tracks])
         dt = np.array([t - tr.t for tr in tracks])
-        x_prior, P_prior = self.ukf.predict(X, P, dt)
+        # a batch older than a track's state is carried forward to it (late: lag > 0)
+        lag = np.maximum(-dt, 0.0)
+        x_prior, P_prior = self.ukf.predict(X, P, np.maximum(dt, 0.0))
         zp, S0, Pxz = self.ukf.innovation(x_prior, P_prior)
         refs = [reference_position(tr, t, p.velocity_baseline) for tr in tracks]
         reference = np.array([(r[0], r[1]) for r in refs]).reshape(n, 2)
         baseline = np.array([r[2] for r in refs])
         z = measurements(positions, reference, baseline, zp)
-        R = measurement_noise(position_var, baseline)
+        R = measurement_noise(position_var, baseline, self.ukf.spectral_density)
+        if lag.any():
+            extrapolate_late(z, R, lag, x_prior, P_prior, self.ukf.spectral_density)
         S = S0[:, None] + R
         z_tilde = z - zp[:, None, :]
         d2, logdet = mahalanobis(z_tilde, S)
-        last_seen = np.array([_last_seen(tr) for tr in tracks]).reshape(n, 2)
-        unseen = np.array([t - tr.last_detection for tr in tracks])
+        seen = [seen_near(tr, t) for tr in tracks]
+        last_seen = np.array([(s[0], s[1]) for s in seen]).reshape(n, 2)
+        unseen = np.array([s[2] for s in seen])
         allowed = (d2 <= self.gate) & within_reach(
             positions, last_seen, unseen, p.max_speed, p.min_reach
         )
         # a detection too weak to start a track cannot revive a missing one either
-        missing = unseen >= p.sec_before_missing
+        missing = np.array([t - tr.last_detection for tr in tracks]) >= p.sec_before_missing
         weak = confidence < p.min_confidence_initialization
         allowed &= ~(missing[:, None] & weak[None, :])
-        if features is not None:  # identities lost for long come back by appearance only
-            allowed[self._missing_candidates(t, set())] = False
+        if features is not None:
+            # a person lost for long is not given someone their classifier clearly rejects
+            lost = self._missing_candidates(t, set())
+            if lost:
+                looks = np.array([self.appearance.confidence(tracks[i].id, features) for i in lost])
+                allowed[lost] &= looks >= -self.appearance_params.min_confidence
         cost = association_cost(d2, logdet, confidence, p.motion_weight, p.detector_weight)
         pairs = assign(cost, allowed)
 
@@ -237,11 +250,6 @@ class Tracker:
             x_post, P_post = self.ukf.update(
                 x_prior[ti], P_prior[ti], zp[ti], S[ti, dj], Pxz[ti], z[ti, dj]
             )
-            late = dt[ti] < 0
-            if late.any():  # carry an out-of-sequence update forward to the track's time
-                x_post[late], P_post[late] = self.ukf.predict(
-                    x_post[late], P_post[late], -dt[ti][late]
-                )
             for k, (i, j) in enumerate(pairs):
                 self._take(
                     tracks[i], max(tracks[i].t, t), x_post[k], P_post[k], t, sensor, detections[j]
@@ -361,7 +369,7 @@ class Tracker:
         """Each associated, unoccluded detection teaches its track; the others are negatives."""
         for i, j in pairs:
             track = self.tracks[i]
-            if detections[j].occluded or not np.all(np.isfinite(features[j])):
+            if not np.all(np.isfinite(features[j])):
                 continue
             if len(track.features) < self.appearance_params.recovery_detections:
                 track.features.append(features[j])
@@ -461,7 +469,7 @@ class Tracker:
             self.next_id += 1
             record_position(track, t, p.max_detection_delay + 2 * p.velocity_baseline)
             on_detected(track, t, d.confidence, d.height, sensor, p)
-            if features is not None and not d.occluded and np.all(np.isfinite(features[j])):
+            if features is not None and np.all(np.isfinite(features[j])):
                 track.features.append(features[j])
             self.tracks.append(track)
 

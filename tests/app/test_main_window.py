@@ -4,8 +4,10 @@ import os
 import subprocess
 import sys
 
+import msgspec
 import numpy as np
 import pytest
+import yaml
 from PySide6.QtGui import QImage
 
 from optrack.geometry import make_pose
@@ -131,3 +133,29 @@ def test_optrack_gui_takes_a_screenshot_and_quits(tmp_path):
     assert (image.width(), image.height()) == (1280, 800)
     pixels = image_array(image)
     assert len(np.unique(pixels.reshape(-1, 3), axis=0)) > 10
+
+
+def test_a_calibration_file_shows_its_cameras_without_a_site(window, tmp_path):
+    looking_down = make_pose(np.diag([1.0, -1.0, -1.0]), [1.0, 2.0, 3.0])
+    path = tmp_path / "network.yaml"
+    path.write_text(
+        yaml.safe_dump(
+            {
+                "format": "optrack-calibration",
+                "version": 1,
+                "sensors": {
+                    "door": {
+                        "world_T_camera": looking_down.tolist(),
+                        "intrinsics": msgspec.to_builtins(KINECT),
+                    }
+                },
+            }
+        )
+    )
+    assert window.open_calibration(str(path))
+    assert set(window.world.cameras) == {"door"}
+    assert window.top_view.footprints["door"].shape == (4, 2)
+    assert window.site_label.text() == "No site connected"  # a file is not a site
+    assert not window.open_calibration(str(tmp_path / "missing.yaml"))
+    assert "missing.yaml" in window.log_panel.lines()[-1]
+    assert "Error:" in window.log_panel.lines()[-1]

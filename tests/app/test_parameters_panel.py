@@ -113,7 +113,7 @@ def test_decimals_show_step_bounds_and_default_exactly():
 
 
 def test_every_node_stage_of_optrack_builds_a_page(qtbot):
-    from app.main_window import node_schemas
+    from app.source import node_schemas
 
     schemas = node_schemas()
     assert {"detection", "tracking"} <= set(schemas)

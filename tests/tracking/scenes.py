@@ -70,9 +70,19 @@ def crossing_scene() -> Scene:
 
 def pillar_scene() -> Scene:
     """Red walks behind a pillar, waits there 3 s and walks back; meanwhile blue comes in
-    on the far side, where red would be had she walked on. Green stays in view."""
-    red = Person(1, Path((0, 3, 6, 9, 12), ((2, 3), (5, 3), (5, 3), (2, 3), (2, 3))), histogram=RED)
-    blue = Person(2, Path((4, 6, 7.5, 12), ((8, 3.5), (6, 3.5), (6, 5), (6, 5))), histogram=BLUE)
-    green = Person(3, Path((0, 12), ((2.5, 6.5), (7.5, 6.5))), histogram=GREEN)
+    on the far side, where red would be had she walked on. Green stands at the back."""
+    red = Person(
+        1,
+        Path(
+            (0.0, 2.5, 5.5, 7.7, 12.0), ((2.5, 3.0), (5.0, 3.0), (5.0, 3.0), (2.8, 3.0), (2.8, 3.0))
+        ),
+        histogram=RED,
+    )
+    blue = Person(
+        2,
+        Path((4.0, 5.5, 7.0, 12.0), ((8.0, 3.5), (6.5, 3.5), (6.5, 5.0), (6.5, 5.0))),
+        histogram=BLUE,
+    )
+    green = Person(3, Path((0.0, 12.0), ((3.0, 6.0), (3.0, 6.0))), histogram=GREEN)
     sensor = SyntheticSensor("cam", 5.0, -1.0, math.pi / 2, max_range=9.0)
     return Scene((red, blue, green), (sensor,), 12.0, pillars=((5.0, 1.5, 0.3),))

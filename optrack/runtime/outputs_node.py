@@ -1,0 +1,105 @@
+"""The outputs node: tracks from the bus to UDP JSON, OSC and WebSocket.
+
+It runs inside the tracker node's process (``optrack node track``) or as its
+own process (``optrack run`` starts one: ``python -m
+optrack.runtime.outputs_node --site NAME --config FILE``). Its name on the
+bus is ``outputs``: its status lists every destination with what was sent
+and the errors, and parameter updates on ``params/outputs`` (stage
+``outputs``) add, change or remove destinations while it runs; a
+destination that cannot be used is refused and the running ones are kept.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from typing import Any
+
+from optrack.net.bus import Bus
+from optrack.net.messages import TracksMessage
+from optrack.outputs.streams import Outputs
+from optrack.params import Params
+from optrack.runtime.node import Node, RateMeter
+
+__all__ = ["OutputsNode", "main"]
+
+log = logging.getLogger("optrack.runtime.outputs")
+
+
+class OutputsNode(Node):
+    """Tracks in, datagrams out (see the module docstring)."""
+
+    role = "outputs"
+
+    def __init__(
+        self,
+        bus: Bus,
+        node_params: Params,
+        outputs_params: Params,
+        logger: logging.Logger = log,
+    ) -> None:
+        self.outputs = Outputs(outputs_params.schema.create(outputs_params.as_dict()))
+        super().__init__(bus, "outputs", node_params, {"outputs": outputs_params}, logger)
+        self._meter = RateMeter()
+        self._latency = RateMeter()
+        bus.subscribe(bus.keys.tracks, TracksMessage, self._on_tracks)
+        self.state = "running"
+
+    def _on_params(self, message: Any, key: str) -> None:
+        # No frames to wait for: apply at once (on the bus's thread).
+        super()._on_params(message, key)
+        self.apply_params()
+
+    def on_params(self, stage: str, changed: dict[str, Any]) -> None:
+        self.outputs.configure(changed)  # an OutputError refuses the whole update
+
+    def _on_tracks(self, message: TracksMessage, key: str) -> None:
+        self.outputs.publish(message.batch)
+        now = time.monotonic()
+        self._meter.add(now=now)
+        self._latency.add(time.time() - message.batch.stamp, now)
+
+    def status_fields(self) -> dict[str, Any]:
+        return {
+            "fps": self._meter.rate(),
+            "latency_ms": self._latency.median() * 1000.0,
+            "destinations": self.outputs.status(),
+            "values": {
+                "frames": self.outputs.frames,
+                "heartbeats": self.outputs.heartbeat_seq,
+                "max_id": self.outputs.max_id,
+            },
+        }
+
+    def close(self) -> None:
+        self.outputs.close()
+        super().close()
+
+    def run(self) -> int:
+        self.start_status()
+        self.publish_status()
+        try:
+            while not self._stop.wait(0.5):
+                pass
+        finally:
+            self.close()
+        return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m optrack.runtime.outputs_node --site NAME [--config FILE]``."""
+    from optrack.runtime.cli import run_outputs_node
+
+    parser = argparse.ArgumentParser(
+        prog="python -m optrack.runtime.outputs_node",
+        description="Outputs node: tracks from the bus to UDP JSON, OSC and WebSocket.",
+    )
+    parser.add_argument("--site", required=True, help="site name")
+    parser.add_argument("--config", help="YAML configuration")
+    return run_outputs_node(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

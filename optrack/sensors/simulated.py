@@ -1,0 +1,208 @@
+"""A simulated RGB-D sensor: one sensor of a simulated venue, as a :class:`Sensor`.
+
+``SimulatedSensor("mixed", 1)`` is sensor 1 of the ``mixed`` scenario. In
+real time (the default) ``read()`` waits until each frame is due on the wall
+clock and stamps it with wall-clock seconds, like a camera; a consumer that
+falls behind misses frames, as with a camera. With ``real_time=False`` it
+renders frames as fast as asked and stamps them with simulated seconds
+(recording, tests). Sensors of one venue in different processes agree on
+where everyone is when they share the seed and ``start_time`` (the wall
+clock time of the simulation's t = 0).
+
+The one thing a camera cannot do: :meth:`SimulatedSensor.truth` gives the
+ground truth at the last frame's capture time.
+
+URI: ``sim://SCENARIO/N?seed=0&people=5&sensors=3&model=kinect1&seconds=60
+&realtime=false&noise=false&start=1700000000.0&id=cam0`` (all optional).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import urllib.parse
+
+import msgspec
+
+from optrack.recording.format import GroundTruth, SensorInfo
+from optrack.sensors.base import Sensor, SensorError
+from optrack.sim.scenario import Scenario
+from optrack.sim.world import Simulation, WorldState
+from optrack.types import RGBDFrame
+
+__all__ = ["SimulatedSensor"]
+
+_TRUE = {"1", "true", "yes", "on"}
+_FALSE = {"0", "false", "no", "off"}
+
+
+class SimulatedSensor(Sensor):
+    """Sensor ``index`` of a simulated scenario (see the module docstring)."""
+
+    def __init__(
+        self,
+        scenario: str | Scenario = "mixed",
+        index: int = 0,
+        *,
+        seed: int = 0,
+        people: int | None = None,
+        sensors: int | None = None,
+        sensor_model: str | None = None,
+        seconds: float | None = None,
+        real_time: bool = True,
+        noise: bool = True,
+        start_time: float | None = None,
+        sensor_id: str | None = None,
+        uri: str = "",
+        clock: object = time,
+    ) -> None:
+        self.simulation = Simulation(
+            scenario,
+            seed=seed,
+            people=people,
+            sensors=sensors,
+            sensor_model=sensor_model,
+            seconds=seconds,
+        )
+        count = len(self.simulation.sensors)
+        if not 0 <= index < count:
+            raise SensorError(
+                f"scenario '{self.simulation.scenario.name}' has {count} sensor(s) (0-{count - 1}); "
+                f"sensor {index} does not exist, pick one of those or add sensors."
+            )
+        self.index = index
+        self.real_time = real_time
+        self.noise = noise
+        self.start_time = start_time
+        self._sensor = self.simulation.sensors[index]
+        self._id = sensor_id or self._sensor.id
+        self.uri = uri or self._sensor.uri
+        self._clock = clock
+        self._next = 0
+        self._epoch: float | None = None
+        self._state: WorldState | None = None
+        self._count = self.simulation.frame_count(index)
+
+    # ------------------------------------------------------------ creation
+    @classmethod
+    def from_uri(cls, text: str) -> SimulatedSensor:
+        """A sensor from ``sim://SCENARIO/N?option=value&...`` (see the module docstring)."""
+        parsed = urllib.parse.urlsplit(text)
+        if parsed.scheme != "sim":
+            raise SensorError(f"'{text}' is not a sim:// URI; write sim://SCENARIO/N.")
+        target = (parsed.netloc + parsed.path).strip("/")
+        scenario, _, number = target.rpartition("/")
+        if not scenario or not number.isdigit():
+            raise SensorError(
+                f"sensor URI '{text}' must be sim://SCENARIO/N with N the sensor number (0, 1, ...)."
+            )
+        options = dict(urllib.parse.parse_qsl(parsed.query, keep_blank_values=True))
+        known = {
+            "seed",
+            "people",
+            "sensors",
+            "model",
+            "seconds",
+            "realtime",
+            "noise",
+            "start",
+            "id",
+        }
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise SensorError(
+                f"sensor URI '{text}' has unknown option '{unknown[0]}' "
+                f"(known: {', '.join(sorted(known))})."
+            )
+
+        def number_of(name: str, kind: type) -> int | float | None:
+            if name not in options:
+                return None
+            try:
+                value = kind(options[name])
+            except ValueError:
+                what = "a whole number" if kind is int else "a number"
+                raise SensorError(
+                    f"sensor URI '{text}': {name} must be {what}; got '{options[name]}'."
+                ) from None
+            if kind is float and not math.isfinite(value):
+                raise SensorError(f"sensor URI '{text}': {name} must be finite.")
+            return value
+
+        def flag(name: str, default: bool) -> bool:
+            value = options.get(name)
+            if value is None:
+                return default
+            if value.lower() in _TRUE:
+                return True
+            if value.lower() in _FALSE:
+                return False
+            raise SensorError(f"sensor URI '{text}': {name} must be true or false; got '{value}'.")
+
+        return cls(
+            scenario,
+            int(number),
+            seed=int(number_of("seed", int) or 0),
+            people=number_of("people", int),  # type: ignore[arg-type]
+            sensors=number_of("sensors", int),  # type: ignore[arg-type]
+            sensor_model=options.get("model"),
+            seconds=number_of("seconds", float),
+            real_time=flag("realtime", True),
+            noise=flag("noise", True),
+            start_time=number_of("start", float),
+            sensor_id=options.get("id") or None,
+            uri=text,
+        )
+
+    # ----------------------------------------------------------- interface
+    @property
+    def info(self) -> SensorInfo:
+        info = self._sensor.info
+        if self._id != info.id or self.uri != info.uri:
+            info = msgspec.structs.replace(info, id=self._id, uri=self.uri)
+        return info
+
+    @property
+    def fps(self) -> float:
+        return self._sensor.model.fps
+
+    def open(self) -> None:
+        if self._epoch is None:
+            self._epoch = self.start_time if self.start_time is not None else self._clock.time()
+
+    def read(self) -> RGBDFrame | None:
+        self.open()
+        sensor, sim = self._sensor, self.simulation
+        if self.real_time:
+            elapsed = self._clock.time() - self._epoch
+            # A consumer that fell behind gets the latest frame due, as from a camera.
+            due = math.floor((elapsed - sensor.phase) * sensor.model.fps + 1e-9)
+            self._next = max(self._next, min(due, self._count))
+        n = self._next
+        if n >= self._count:
+            return None
+        t = sensor.frame_time(n)
+        if self.real_time:
+            wait = self._epoch + t - self._clock.time()
+            if wait > 0:
+                self._clock.sleep(wait)
+        self._state = sim.snapshot(t)
+        frame = sim.frame(self.index, n, self._state, noise=self.noise)
+        if self.real_time:
+            frame.timestamp += self._epoch
+        frame.sensor_id = self._id
+        self._next = n + 1
+        return frame
+
+    def truth(self, visibility: bool = True) -> GroundTruth | None:
+        """Ground truth at the last frame's capture time (world clock), or None before
+        the first frame. Its ``t`` is simulated seconds (plus ``start_time`` in real time)."""
+        if self._state is None:
+            return None
+        truth = self.simulation.truth(self._state, visibility=visibility)
+        if self.real_time and self._epoch is not None:
+            truth = msgspec.structs.replace(truth, t=truth.t + self._epoch)
+        return truth
+
+    def __repr__(self) -> str:
+        return f"SimulatedSensor({self.uri!r})"

@@ -1,0 +1,110 @@
+"""The calibration checkerboard: found by OpenCV where it truly is, in colour and infrared;
+the operator shows it to every sensor and pair, then lays it on the floor."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from optrack.geometry import invert, project, transform_points
+from optrack.sim import Simulation
+from optrack.sim.board import neighbouring_pairs
+
+CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.001)
+
+
+def _eight_bit(image: np.ndarray) -> np.ndarray:
+    if image.ndim == 3:
+        return cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    scale = 255.0 / max(float(np.percentile(image, 99.5)), 1.0)
+    return np.clip(image.astype(np.float32) * scale, 0, 255).astype(np.uint8)
+
+
+def _detected_vs_true(sim: Simulation, index: int, t: float, stream: str) -> np.ndarray:
+    """Distances (px) from each corner OpenCV finds to the nearest true projection."""
+    state = sim.snapshot(t)
+    frame = sim.frame(index, 0, state, noise=False)
+    board = sim.truth(state).boards[0]
+    image = _eight_bit(getattr(frame, stream))
+    found, corners = cv2.findChessboardCorners(image, (board.cols, board.rows))
+    assert found, f"OpenCV did not find the board in the {stream} image"
+    corners = cv2.cornerSubPix(image, corners, (3, 3), (-1, -1), CRITERIA).reshape(-1, 2)
+    sensor = sim.sensors[index]
+    camera_T_board = invert(sensor.world_T_camera) @ np.array(board.world_T_board)
+    truth, _ = project(transform_points(camera_T_board, sim.board.corners), sensor.model.intrinsics)
+    assert len(corners) == board.cols * board.rows
+    return np.linalg.norm(corners[:, None, :] - truth[None], axis=2).min(axis=1)
+
+
+@pytest.mark.parametrize(
+    ("model", "stream"),
+    [
+        ("kinect2", "color"),
+        ("kinect2", "infrared"),
+        ("kinect1", "color"),
+        ("sr4500", "infrared"),
+        ("stereo", "color"),
+    ],
+)
+def test_noise_free_board_is_found_where_it_truly_is(model, stream):
+    sim = Simulation("calibration", seed=0, sensor_model=model)
+    first = sim.operator.steps[0]
+    assert first.kind == "hold" and first.sensors == (0,)
+    # The operator starts at the first spot: after raising the board, it is held there.
+    t = sim.board.params.raise_seconds + 0.5
+    errors = _detected_vs_true(sim, 0, t, stream)
+    assert errors.max() < 0.5
+
+
+def test_board_truth_is_exact_when_held_and_when_on_the_floor():
+    sim = Simulation("calibration", seed=0, sensors=3)
+    steps = sim.operator.steps
+    on_floor = []
+    for t in np.arange(0.0, sim.seconds, 0.5):
+        truth = sim.truth(sim.snapshot(t), visibility=False)
+        assert len(truth.boards) == 1
+        board = truth.boards[0]
+        pose = np.array(board.world_T_board)
+        assert (board.cols, board.rows, board.square) == (6, 5, 0.15)
+        if board.on_floor:
+            on_floor.append(pose)
+            assert pose[2, 3] == pytest.approx(sim.board.params.thickness, abs=1e-6)
+            assert pose[:3, 2] @ [0.0, 0.0, 1.0] == pytest.approx(-1.0)  # face up
+    assert len({tuple(np.round(p[:2, 3], 2)) for p in on_floor}) == sum(
+        s.kind == "floor" for s in steps
+    )
+
+
+def test_operator_shows_the_board_to_every_sensor_and_neighbouring_pair():
+    sim = Simulation("calibration", seed=0, sensors=3)
+    held = {s.sensors for s in sim.operator.steps if s.kind == "hold"}
+    assert {(0,), (1,), (2,)} <= held
+    views = [s for s in sim.operator.steps]
+    pairs = set(neighbouring_pairs([_view(s) for s in sim.sensors]))
+    assert pairs <= held
+    floor = [s for s in views if s.kind == "floor"]
+    assert len(floor) == 3
+    assert sim.seconds > sum(1 for _ in views) * sim.board.params.hold_seconds
+
+
+def test_a_neighbouring_pair_sees_the_same_board_at_once():
+    sim = Simulation("calibration", seed=0, sensors=3)
+    pair_step = next(s for s in sim.operator.steps if len(s.sensors) == 2)
+    index = sim.operator.steps.index(pair_step)
+    # Run until that step's hold, then check both sensors find the board.
+    t = 0.0
+    while not (sim.operator.index == index and sim.operator.phase == "hold"):
+        t += 0.25
+        sim.snapshot(t)
+        assert t < sim.seconds
+    t += 0.5
+    errors = [_detected_vs_true(sim, k, t, "infrared") for k in pair_step.sensors]
+    assert all(e.max() < 0.5 for e in errors)
+
+
+def _view(sensor):
+    from optrack.sim.board import SensorView
+
+    model = sensor.model
+    return SensorView(sensor.world_T_camera, model.intrinsics, model.min_range, model.max_range)

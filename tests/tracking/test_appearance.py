@@ -1,0 +1,116 @@
+"""Appearance: on-line boosted colour classifiers recover identities (Munaro 2012 5.2-5.4)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optrack.evaluation.synthetic import person_histogram, render
+from optrack.tracking import APPEARANCE_PARAMS
+from optrack.tracking.appearance import (
+    AppearanceModel,
+    FeaturePool,
+    OnlineBoostedClassifier,
+    histogram_shape,
+)
+from tests.tracking.scenes import BLUE, GREEN, RED, ids_of, pillar_scene, run
+
+
+def _noisy(histogram, rng: np.random.Generator) -> list[float]:
+    h = np.asarray(histogram) * rng.lognormal(0.0, 0.15, size=len(histogram))
+    return list(h / h.sum())
+
+
+def test_histogram_shape_is_the_detectors_hue_by_saturation_grid() -> None:
+    assert histogram_shape(64, "16x4") == (16, 4)
+    assert histogram_shape(48, "16x4") == (48,)
+    assert histogram_shape(512, "8x8x8") == (8, 8, 8)
+
+
+def test_a_feature_is_the_histogram_mass_inside_a_random_box() -> None:
+    pool = FeaturePool((16, 4), 50, 2, np.random.default_rng(0))
+    assert pool.boxes.shape == (50, 64)
+    uniform = np.full((1, 64), 1 / 64)
+    np.testing.assert_allclose(pool(uniform)[0], pool.boxes.sum(axis=1) / 64)
+    grid = pool.boxes.reshape(50, 16, 4)
+    for box in grid:  # each box is a product of intervals, at least 2 bins a side
+        hues = np.flatnonzero(box.any(axis=1))
+        sats = np.flatnonzero(box.any(axis=0))
+        assert hues.size >= 2 and sats.size >= 2
+        assert np.all(np.diff(hues) == 1) and np.all(np.diff(sats) == 1)
+        assert box[np.ix_(hues, sats)].all()
+
+
+def test_a_classifier_tells_its_person_from_other_people_and_unseen_colours() -> None:
+    rng = np.random.default_rng(1)
+    model = AppearanceModel(APPEARANCE_PARAMS.create({"update_interval": 0.0}))
+    features = model.features([_noisy(RED, rng), _noisy(GREEN, rng)])
+    for k in range(40):
+        red, green = model.features([_noisy(RED, rng), _noisy(GREEN, rng)])
+        model.learn(k * 0.1, 1, red, np.array([green]))
+    assert features is not None
+    test = model.features([_noisy(RED, rng), _noisy(GREEN, rng), _noisy(BLUE, rng)])
+    red, green, blue = model.confidence(1, test)
+    assert red > 0.8
+    assert green < -0.5
+    assert blue < -0.5  # never seen: rejected thanks to the random negatives
+
+
+def test_an_untrained_classifier_says_nothing() -> None:
+    params = APPEARANCE_PARAMS.create()
+    classifier = OnlineBoostedClassifier(10, 5, params)
+    for _ in range(10):
+        classifier.learn(np.ones(10), positive=True)  # no negatives yet
+    assert not classifier.trained
+    assert classifier.confidence(np.ones((2, 10))).tolist() == [0.0, 0.0]
+
+
+def test_learning_is_rate_limited_per_track() -> None:
+    model = AppearanceModel(APPEARANCE_PARAMS.create({"update_interval": 0.5}))
+    f = model.features([RED])[0]
+    assert model.learn(0.0, 7, f, np.empty((0, f.size)))
+    assert not model.learn(0.3, 7, f, np.empty((0, f.size)))
+    assert model.learn(0.6, 7, f, np.empty((0, f.size)))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_person_walking_behind_a_pillar_keeps_her_id_with_appearance_on(seed: int) -> None:
+    scene = pillar_scene()
+    _, truth = render(scene, seed)
+    score, tracker, outputs = run(scene, seed, appearance="on")
+    red_ids = ids_of(scene.people[0], outputs, truth.times)
+    assert len(red_ids) > 200
+    assert len(set(red_ids)) == 1, f"red had tracks {sorted(set(red_ids))}"
+    blue_ids = ids_of(scene.people[1], outputs, truth.times)
+    assert red_ids[0] not in blue_ids, "blue must not be given red's identity"
+    assert score.idsw == 0
+
+
+def test_without_appearance_the_person_behind_the_pillar_lends_her_id_to_another() -> None:
+    """The same scene with appearance off: blue, appearing where red was heading, takes
+    red's lost track (what the appearance test above guards against)."""
+    scene = pillar_scene()
+    _, truth = render(scene, 0)
+    _, _, outputs = run(scene, 0, appearance="off")
+    red_ids = set(ids_of(scene.people[0], outputs, truth.times))
+    blue_ids = set(ids_of(scene.people[1], outputs, truth.times))
+    assert red_ids & blue_ids
+
+
+def test_a_deleted_identity_is_given_back_to_a_new_track_that_looks_like_it() -> None:
+    from optrack.evaluation.synthetic import Path, Person, Scene, SyntheticSensor
+
+    # red leaves the room (out of view) for 10 s, longer than sec_before_old, and returns
+    red = Person(
+        1,
+        Path((0, 3, 4, 14, 15, 18), ((2, 3), (5, 3), (9, 3), (9, 3), (5, 3), (3, 3))),
+        histogram=RED,
+    )
+    green = Person(2, Path((0.0, 18.0), ((3.0, 6.0), (6.0, 6.0))), histogram=GREEN)
+    sensor = SyntheticSensor("cam", 5.0, -1.0, np.pi / 2, fov_deg=60.0, max_range=9.0)
+    scene = Scene((red, green), (sensor,), 18.0, false_alarms_per_frame=0.0)
+    _, truth = render(scene, 0)
+    _, tracker, outputs = run(scene, 0, appearance="on")
+    red_ids = ids_of(red, outputs, truth.times)
+    assert len(set(red_ids)) == 1, f"red had tracks {sorted(set(red_ids))}"
+    assert tracker.status().recovered_identities >= 1

@@ -1,0 +1,104 @@
+"""Track life-cycle (Munaro 2012 section 5.4) with OpenPTrack's multi-camera defaults."""
+
+from __future__ import annotations
+
+import pytest
+
+from optrack.tracking import TRACKING_PARAMS, Tracker
+from optrack.types import Detection, DetectionBatch, TrackStatus
+
+RATE = 30.0
+
+
+def _batch(t: float, *xs: float, confidence: float = 1.0, sensor: str = "a") -> DetectionBatch:
+    people = [Detection(x=x, y=0.0, z=0.9, height=1.7, confidence=confidence) for x in xs]
+    return DetectionBatch(sensor_id=sensor, stamp=t, detections=people)
+
+
+def _run(tracker: Tracker, start: float, stop: float, *xs: float, **kw) -> None:
+    k = 0
+    while start + k / RATE < stop - 1e-9:
+        tracker.update(_batch(start + k / RATE, *xs, **kw))
+        k += 1
+
+
+def test_schema_holds_openptracks_multi_camera_defaults() -> None:
+    p = TRACKING_PARAMS.create()
+    assert (p.gate_probability, p.acceleration_variance, p.position_variance_weight) == (
+        0.99,
+        100.0,
+        30.0,
+    )
+    assert (p.detector_weight, p.motion_weight) == (-0.25, 0.25)
+    assert (p.sec_before_old, p.sec_before_fake, p.sec_remain_new) == (8.0, 2.4, 1.2)
+    assert (p.detections_to_validate, p.max_detection_delay) == (3, 2.0)
+
+
+def test_an_unvalidated_track_dies_after_sec_before_fake() -> None:
+    tracker = Tracker(TRACKING_PARAMS.create({"min_confidence_initialization": 0.5}))
+    tracker.update(_batch(0.0, 1.0))  # born (confident) ...
+    tracker.update(_batch(1 / RATE, 1.0, confidence=0.0))  # ... then only weak detections
+    _run(tracker, 2 / RATE, 2.35, 1.0, confidence=0.0)
+    assert [tr.validated for tr in tracker.tracks] == [False]
+    assert tracker.output().tracks == []  # never published
+    _run(tracker, 2.35, 2.45, 1.0, confidence=0.0)
+    assert tracker.tracks == []
+
+
+def test_a_track_seen_once_dies_at_sec_before_fake_not_sec_before_old() -> None:
+    tracker = Tracker()
+    tracker.update(_batch(0.0, 1.0))
+    _run(tracker, 0.1, 2.39)  # empty batches
+    assert len(tracker.tracks) == 1
+    tracker.update(_batch(2.4, 5.0))
+    assert [tr.born for tr in tracker.tracks] == [2.4]  # the old one is gone, a new one born
+
+
+def test_a_track_is_validated_by_detections_to_validate_confident_detections() -> None:
+    tracker = Tracker(TRACKING_PARAMS.create({"min_confidence_initialization": 0.5}))
+    tracker.update(_batch(0.0, 1.0))
+    tracker.update(_batch(1 / RATE, 1.0))
+    assert tracker.output().tracks == []
+    tracker.update(_batch(2 / RATE, 1.0))
+    assert [t.id for t in tracker.output().tracks] == [1]
+
+
+def test_new_becomes_normal_after_sec_remain_new_then_missing_then_deleted_after_sec_before_old() -> (
+    None
+):
+    tracker = Tracker()
+    _run(tracker, 0.0, 1.0, 1.0)
+    assert tracker.tracks[0].status is TrackStatus.NEW
+    _run(tracker, 1.0, 1.5, 1.0)
+    assert tracker.tracks[0].status is TrackStatus.NORMAL
+    last = tracker.tracks[0].last_detection
+    _run(tracker, 1.5, 1.5 + 0.3)  # nobody
+    assert tracker.tracks[0].status is TrackStatus.MISSING
+    assert tracker.output().tracks[0].status == "missing"
+    _run(tracker, 1.8, last + 7.9)
+    assert len(tracker.tracks) == 1
+    _run(tracker, last + 7.9, last + 8.1)
+    assert tracker.tracks == []
+
+
+def test_a_missing_track_becomes_normal_again_when_detected() -> None:
+    tracker = Tracker()
+    _run(tracker, 0.0, 2.0, 1.0)
+    _run(tracker, 2.0, 2.5)
+    assert tracker.tracks[0].status is TrackStatus.MISSING
+    _run(tracker, 2.5, 2.6, 1.0)
+    assert tracker.tracks[0].status is TrackStatus.NORMAL
+    assert tracker.tracks[0].id == 1
+
+
+def test_a_weak_detection_starts_no_track() -> None:
+    tracker = Tracker(TRACKING_PARAMS.create({"min_confidence_initialization": 0.5}))
+    _run(tracker, 0.0, 1.0, 1.0, confidence=0.2)
+    assert tracker.tracks == []
+
+
+def test_detections_below_min_confidence_detections_are_ignored() -> None:
+    tracker = Tracker(TRACKING_PARAMS.create({"min_confidence_detections": -1.0}))
+    _run(tracker, 0.0, 1.0, 1.0)
+    _run(tracker, 1.0, 1.5, 1.0, confidence=-1.5)
+    assert tracker.tracks[0].last_detection == pytest.approx(1.0 - 1 / RATE)
