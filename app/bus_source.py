@@ -22,6 +22,7 @@ from app.source import OUTPUT_PORTS, SiteSource, node_schemas
 from optrack.errors import UserError
 from optrack.net import (
     Bus,
+    BusError,
     CalibrationMessage,
     DetectionsMessage,
     ParamsMessage,
@@ -31,7 +32,9 @@ from optrack.net import (
 )
 from optrack.outputs.udp import parse_address
 from optrack.params import REGISTRY, Params
+from optrack.runtime.detector_node import CalibrationRequest
 from optrack.runtime.preview import decode_preview
+from optrack.types import NetworkCalibration, SensorCalibration
 
 __all__ = ["BusSource"]
 
@@ -41,9 +44,21 @@ log = logging.getLogger("app.bus")
 class BusSource(SiteSource):
     """A site on the bus. ``bus_params`` are the ``bus`` stage's values (mode, endpoints)."""
 
-    def __init__(self, site: str, bus_params: Params, parent: Any = None) -> None:
+    def __init__(
+        self,
+        site: str,
+        bus_params: Params,
+        parent: Any = None,
+        *,
+        retry_while: threading.Event | None = None,
+        label: str = "",
+    ) -> None:
+        """``retry_while``: keep trying to join while it is set (a site still starting);
+        ``label`` names the site in the window (default: its name and where it is)."""
         super().__init__(parent)
         self.site = site
+        self.retry_while = retry_while
+        self.label = label
         self.bus_params = bus_params
         self.node = f"gui-{os.getpid()}"
         self.bus: Bus | None = None
@@ -54,6 +69,8 @@ class BusSource(SiteSource):
         self._sent: dict[tuple[str, str, str], tuple[float, int]] = {}
         self._unknown_stages: set[str] = set()
         self._outputs: dict[str, Any] = {}
+        self._site_calibration = False
+        self._preview_calibration = NetworkCalibration()
         self._disabled: set[tuple[str, str]] = set()
         node_schemas()  # the stages' schemas must be registered to build their controls
         self._thread = threading.Thread(target=self._join, name="gui-bus-join", daemon=True)
@@ -61,11 +78,21 @@ class BusSource(SiteSource):
 
     # ------------------------------------------------------------ joining
     def _join(self) -> None:
-        try:
-            bus = Bus(self.site, self.node, self.bus_params)
-        except UserError as error:
-            self.log.emit("error", str(error))
-            return
+        while True:
+            try:
+                bus = Bus(self.site, self.node, self.bus_params)
+                break
+            except BusError as error:
+                retry = self.retry_while
+                if retry is not None and retry.is_set() and not self._closed:
+                    time.sleep(0.2)
+                    continue  # the site is still starting (rendering its venue, say)
+                if not self._closed:
+                    self.log.emit("error", str(error))
+                return
+            except UserError as error:  # a configuration that cannot work
+                self.log.emit("error", str(error))
+                return
         with self._lock:
             if self._closed:
                 bus.close()
@@ -76,19 +103,28 @@ class BusSource(SiteSource):
         bus.subscribe(
             keys.detections(), DetectionsMessage, lambda m, _: self.detections.emit(m.batch)
         )
-        bus.subscribe(
-            keys.calibration, CalibrationMessage, lambda m, _: self.calibration.emit(m.calibration)
-        )
+        bus.subscribe(keys.calibration, CalibrationMessage, self._on_calibration)
         bus.subscribe(keys.status(), StatusMessage, self._on_status)
         bus.subscribe(keys.preview(), PreviewMessage, self._on_preview)
         self.connection.emit(self.describe())
         self.log.emit("info", f"Joined {self.describe()}; waiting for its nodes.")
+        # The calibration is published when it changes; ask the tracker for the one it holds.
+        for reply in bus.query(keys.calibration, CalibrationRequest(), CalibrationMessage):
+            self._on_calibration(reply, keys.calibration)
+            break
+
+    def _on_calibration(self, message: CalibrationMessage, key: str) -> None:
+        with self._lock:
+            self._site_calibration = True
+        self.calibration.emit(message.calibration)
 
     @property
     def connected(self) -> bool:
         return self.bus is not None and not self.bus.closed
 
     def describe(self) -> str:
+        if self.label:
+            return self.label
         mode = str(self.bus_params.mode)
         where = "this computer" if mode == "local" else f"the network ({mode})"
         return f"Site '{self.site}' on {where}"
@@ -136,8 +172,30 @@ class BusSource(SiteSource):
             self.log.emit("warning", f"{error}.")
             return
         self.preview.emit(message.sensor, frame, message.detections)
+        self._camera_from_preview(message)
         if message.cloud and message.cloud_frame == "world":
             self.cloud.emit(message.sensor, cloud)
+
+    def _camera_from_preview(self, message: PreviewMessage) -> None:
+        """Until the site sends a calibration, show the cameras the detectors place with
+        the pose their previews carry (the preview's intrinsics have the full field of view)."""
+        if message.world_T_camera is None:
+            return
+        with self._lock:
+            if self._site_calibration:
+                return
+            known = self._preview_calibration.sensors.get(message.sensor)
+            if known is not None and known.world_T_camera == message.world_T_camera:
+                return
+            sensors = dict(self._preview_calibration.sensors)
+            sensors[message.sensor] = SensorCalibration(
+                world_T_camera=message.world_T_camera, intrinsics=message.intrinsics
+            )
+            self._preview_calibration = NetworkCalibration(
+                sensors=sensors, notes="poses of the detectors' previews"
+            )
+            calibration = self._preview_calibration
+        self.calibration.emit(calibration)
 
     # ---------------------------------------------------- operator's intent
     def nodes_running(self, stage: str) -> list[str]:

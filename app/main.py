@@ -1,12 +1,26 @@
-"""Start the operator application: ``optrack gui`` (and ``make run``)."""
+"""Start the operator application: ``optrack gui`` (and ``make run``).
+
+Which site the window shows:
+
+* by default, the embedded site: the window starts ``optrack run --headless``
+  (with ``--config`` when given) and joins its bus on this computer;
+* ``--join``: a site already running on this computer (``optrack run``
+  starts the window this way; a window started by it joins it too);
+* ``--connect ENDPOINTS``: a site elsewhere on the network, through Zenoh
+  endpoints such as ``tcp/192.168.1.10:7447``;
+* ``--no-site``: none ("No site connected").
+"""
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
 from app.display import HEADLESS_HINT, display_problem
+
+PARENT_ENV = "OPTRACK_PARENT_PID"  # set by 'optrack run' in the processes it starts
 
 
 def configure_qt() -> None:
@@ -21,7 +35,7 @@ def configure_qt() -> None:
     QCoreApplication.setAttribute(Qt.ApplicationAttribute.AA_ShareOpenGLContexts)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="optrack gui", description="Open the operator application."
     )
@@ -31,7 +45,62 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--quit-after", type=float, metavar="S", help="close the window after S seconds"
     )
-    args = parser.parse_args(argv)
+    parser.add_argument(
+        "--config", metavar="FILE", help="YAML configuration of the site (bus, site, stages)"
+    )
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument(
+        "--join", action="store_true", help="join the site already running on this computer"
+    )
+    where.add_argument(
+        "--connect",
+        metavar="ENDPOINTS",
+        help="join a site on the network at these Zenoh endpoints (tcp/HOST:PORT, comma-separated)",
+    )
+    where.add_argument("--no-site", action="store_true", help="open without a site")
+    parser.add_argument("--site", help="site name (default: the configuration's site.name)")
+    return parser
+
+
+def choose_source(args: argparse.Namespace, window):  # noqa: ANN001, ANN201 - Qt objects
+    """Make the window's source as the options say; start the embedded site if needed."""
+    import threading
+
+    from app.source import SiteSource
+
+    if args.no_site:
+        return SiteSource(window)
+    from app.bus_source import BusSource
+    from optrack.runtime.config import load_node_config
+
+    config = load_node_config(args.config)
+    site = args.site or str(config["site"].name)
+    bus = config["bus"]
+    if args.connect:
+        bus.update({"mode": "peer", "connect": args.connect})
+        return BusSource(site, bus, window)
+    if args.join or os.environ.get(PARENT_ENV):
+        return BusSource(site, bus, window)
+    from app.embedded_site import EmbeddedSite
+
+    embedded = EmbeddedSite(args.config, window)
+    alive = threading.Event()
+    alive.set()
+    embedded.ended.connect(lambda code, last: alive.clear())
+    source = BusSource(
+        site,
+        bus,
+        window,
+        retry_while=alive,
+        label=f"Embedded site '{site}' on this computer",
+    )
+    window.run_embedded_site(embedded, stop_timeout_s=3 * float(config["site"].stop_timeout_s))
+    embedded.start()
+    return source
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
 
     problem = display_problem()
     if problem is not None:
@@ -42,11 +111,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     from PySide6.QtWidgets import QApplication
 
     from app.main_window import MainWindow
+    from optrack.errors import UserError
 
     configure_qt()
     app = QApplication.instance() or QApplication([sys.argv[0]])
     app.setApplicationName("optrack")
     window = MainWindow()
+    try:
+        window.set_source(choose_source(args, window))
+    except UserError as error:
+        print(f"optrack gui: {error}", file=sys.stderr)
+        return 1
     window.show()
     status = {"code": 0}
 
@@ -62,10 +137,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         delay_ms = max(0, int(args.quit_after * 1000))
         if args.screenshot:
             QTimer.singleShot(max(0, delay_ms - 200), screenshot)
-        QTimer.singleShot(delay_ms, app.quit)
+        QTimer.singleShot(delay_ms, window.close)
     elif args.screenshot:
         QTimer.singleShot(1500, screenshot)
     app.exec()
+    window.shut_down()
     return status["code"]
 
 

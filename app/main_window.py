@@ -16,6 +16,7 @@ from PySide6.QtCore import Qt
 from PySide6.QtGui import QAction, QKeySequence
 from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow, QWidget
 
+from app.embedded_site import EmbeddedSite
 from app.source import NO_SITE, SiteSource, node_schemas
 from app.view_params import VIEW_PARAMS
 from app.widgets.log_panel import LogPanel, QtLogHandler
@@ -90,6 +91,8 @@ class MainWindow(QMainWindow):
         self.site_label = QLabel(NO_SITE)
         self.site_label.setAlignment(Qt.AlignmentFlag.AlignLeft)
         self.statusBar().addWidget(self.site_label)
+        self.progress_label = QLabel("")
+        self.statusBar().addPermanentWidget(self.progress_label)
         self._menus()
 
         self.parameters.set_schemas(node_schemas())
@@ -114,6 +117,10 @@ class MainWindow(QMainWindow):
         self._connections: list[tuple[Any, Any]] = []
         self._site_clouds: set[str] = set()
         self._stage_reporter: dict[str, str] = {}
+        self.embedded_site: EmbeddedSite | None = None
+        self._site_stop_timeout_s = 0.0
+        self._waiting_text = ""
+        self._shutting_down = False
         self.source = SiteSource(self)
         self.set_source(source if source is not None else self.source)
 
@@ -166,11 +173,36 @@ class MainWindow(QMainWindow):
         for signal, slot in self._connections:
             signal.connect(slot)
         self.show_connection(source.describe() if source.connected else "")
-        self.log_panel.append("info", f"{source.describe()}.")
+        if type(source) is SiteSource:
+            self.log_panel.append("info", f"{NO_SITE}.")
+
+    def run_embedded_site(self, site: EmbeddedSite, stop_timeout_s: float) -> None:
+        """Own the embedded site: show what it says, stop it when the window closes."""
+        self.embedded_site = site
+        self._site_stop_timeout_s = stop_timeout_s
+        self._waiting_text = "Starting the embedded site…"
+        site.line.connect(lambda line: self.log_panel.append("info", line))
+        site.progress.connect(self.progress_label.setText)
+        site.line.connect(lambda _: self.progress_label.setText(""))
+        site.ended.connect(self._embedded_site_ended)
+        self.show_connection("")
+
+    def _embedded_site_ended(self, code: int, last_line: str) -> None:
+        self._waiting_text = ""
+        self.progress_label.setText("")
+        if self._shutting_down:
+            return
+        if code != 0:
+            self.log_panel.append(
+                "error", f"The embedded site stopped (exit status {code}): {last_line}"
+            )
+        else:
+            self.log_panel.append("warning", "The embedded site stopped.")
+        self.show_connection("")
 
     def show_connection(self, description: str) -> None:
         connected = bool(description)
-        text = description if connected else NO_SITE
+        text = description if connected else (self._waiting_text or NO_SITE)
         self.site_label.setText(text)
         self.top_view.overlay.show_message("" if connected else NO_SITE)
         self.world.overlay.show_message("" if connected else NO_SITE)
@@ -268,8 +300,21 @@ class MainWindow(QMainWindow):
         if {"frustum_depth", "coverage_depth"} & set(values):
             self._draw_calibration()
 
-    def closeEvent(self, event) -> None:  # noqa: N802 - Qt
+    def shut_down(self) -> None:
+        """Leave the bus and stop the embedded site; idempotent."""
+        if self._shutting_down:
+            return
+        self._shutting_down = True
         for name in ("optrack", "app"):
             logging.getLogger(name).removeHandler(self.log_handler)
+        for signal, slot in self._connections:
+            signal.disconnect(slot)
+        self._connections = []
         self.source.close()
+        if self.embedded_site is not None:
+            self.statusBar().showMessage("Stopping the embedded site…")
+            self.embedded_site.stop(self._site_stop_timeout_s)
+
+    def closeEvent(self, event) -> None:  # noqa: N802 - Qt
+        self.shut_down()
         super().closeEvent(event)

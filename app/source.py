@@ -53,15 +53,22 @@ OUTPUT_PORTS = {
     "websocket": DEFAULT_WEBSOCKET_PORT,
 }
 
-# The stages the site's nodes run, shown before a site says which it has.
-NODE_STAGES = ("detection", "tracking", "appearance", "smoothing")
+# The stages the site's nodes take live updates for, shown before a site says which it has.
+NODE_STAGES = ("detection", "tracking", "appearance", "smoothing", "outputs")
 
 
 def node_schemas() -> dict[str, Schema]:
-    """The registered schemas of the detector and tracker nodes' stages (importing the
-    modules that register them)."""
-    import optrack.detection.params  # noqa: F401 - registers the detection schema
-    import optrack.tracking.params  # noqa: F401 - registers the tracking schemas
+    """The schemas of the nodes' live stages, after importing every module whose stages a
+    node may run (as ``optrack.runtime.config`` does), so a site's stages are all known."""
+    import optrack.detection.params  # noqa: F401 - each import registers its schemas
+    import optrack.net.clock  # noqa: F401
+    import optrack.net.config  # noqa: F401
+    import optrack.outputs.streams  # noqa: F401
+    import optrack.recording.format  # noqa: F401
+    import optrack.runtime.config  # noqa: F401
+    import optrack.runtime.site_params  # noqa: F401
+    import optrack.sensors.playback  # noqa: F401
+    import optrack.tracking.params  # noqa: F401
 
     return {stage: REGISTRY[stage] for stage in NODE_STAGES if stage in REGISTRY}
 
@@ -91,10 +98,10 @@ class SiteSource(QObject):
     tracks = Signal(object)
     detections = Signal(object)
     calibration = Signal(object)
-    status = Signal(str, dict)
+    status = Signal(str, object)  # object: a dict passes as it is, not as a QVariantMap
     preview = Signal(str, object, object)
     cloud = Signal(str, object)
-    schemas = Signal(dict, dict)
+    schemas = Signal(object, object)
     log = Signal(str, str)
     connection = Signal(str)
 

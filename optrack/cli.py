@@ -162,6 +162,12 @@ def cmd_gui(args: argparse.Namespace) -> int:
         argv += ["--screenshot", args.screenshot]
     if args.quit_after is not None:
         argv += ["--quit-after", str(args.quit_after)]
+    for option in ("config", "connect", "site"):
+        if getattr(args, option, None):
+            argv += [f"--{option}", getattr(args, option)]
+    for flag in ("join", "no_site"):
+        if getattr(args, flag, False):
+            argv.append("--" + flag.replace("_", "-"))
     return gui_main(argv)
 
 
@@ -209,6 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("kinect2", "kinect1", "sr4500", "stereo"),
         help="sensor model for every sensor",
     )
+    p.add_argument("--config", help="YAML parameter file (sim_* stages, e.g. sim_kinect1)")
     _add_json(p)
 
     # detect
@@ -374,7 +381,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = command(
         "run",
         "Run the embedded site (sensors, detectors, tracker) and stream to the outputs.",
-        NotAvailable("the runtime (detector and tracker nodes)"),
+        "optrack.runtime.cli:cmd_run",
     )
     p.add_argument("--headless", action="store_true", help="no window")
     p.add_argument("--seconds", type=float, help="stop after this many seconds")
@@ -392,6 +399,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--screenshot", metavar="PNG", help="save a screenshot of the window to this file"
     )
     p.add_argument("--quit-after", type=float, metavar="S", help="close the window after S seconds")
+    p.add_argument("--config", metavar="FILE", help="YAML configuration of the site")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--join", action="store_true", help="join the site already running on this computer"
+    )
+    where.add_argument(
+        "--connect", metavar="ENDPOINTS", help="join a site on the network (tcp/HOST:PORT,...)"
+    )
+    where.add_argument("--no-site", action="store_true", help="open without a site")
+    p.add_argument("--site", help="site name (default: the configuration's site.name)")
 
     # sensors / record
     p = command(
@@ -450,7 +467,7 @@ def build_parser() -> argparse.ArgumentParser:
     q = command(
         "detect",
         "Detector node: capture one sensor, detect, publish detections.",
-        NotAvailable("the detector node"),
+        "optrack.runtime.cli:cmd_node_detect",
         node,
     )
     q.add_argument("--sensor", required=True, metavar="URI", help="sensor URI")
@@ -459,7 +476,7 @@ def build_parser() -> argparse.ArgumentParser:
     q = command(
         "track",
         "Tracker node: all detections in, tracks out.",
-        NotAvailable("the tracker node"),
+        "optrack.runtime.cli:cmd_node_track",
         node,
     )
     q.add_argument("--site", required=True, help="site name")

@@ -200,7 +200,7 @@ def _title(name: str) -> str:
 class ParametersPanel(QWidget):
     """One page per stage; presets of the node stages; ``changed(stage, values)``."""
 
-    changed = Signal(str, dict)
+    changed = Signal(str, object)  # {name: value}, passed as it is
     problem = Signal(str)  # a sentence for the Log dock
 
     def __init__(self, parent: QWidget | None = None) -> None:

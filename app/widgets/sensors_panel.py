@@ -126,16 +126,20 @@ class SensorsPanel(QWidget):
         self._row(sensor_id)
 
     def set_status(self, node: str, values: dict) -> None:
-        """A node's status; only statuses naming a ``sensor`` belong here."""
-        sensor_id = values.get("sensor")
+        """A node's status; a detector's (named after its sensor) or one naming a ``sensor``."""
+        sensor_id = node if values.get("role") == "detector" else values.get("sensor")
         if not sensor_id:
             return
         row = self._row(str(sensor_id))
         self._last_status[str(sensor_id)] = time.monotonic()
         tooltip = f"node {node}\n" + "\n".join(f"{k}: {v}" for k, v in sorted(values.items()))
+        shown = dict(values)
+        state = values.get("state")
+        if state and state != "running" and not values.get("last_error"):
+            shown["last_error"] = f"node {state}"
         for column, (key, _, fmt) in enumerate(SENSOR_STATUS_KEYS, start=1):
             item = self.table.item(row, column)
-            item.setText(_format(values.get(key), fmt))
+            item.setText(_format(shown.get(key), fmt))
             item.setToolTip(tooltip)
             item.setForeground(ERROR_COLOR if key == "last_error" else self._text_color)
         self.table.item(row, 0).setToolTip(tooltip)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from PySide6.QtCore import QAbstractTableModel, QModelIndex, Qt
@@ -25,6 +26,13 @@ def _cell(track: Track, column: int) -> str:
         f"{track.confidence:.2f}",
         str(track.status),
     )[column]
+
+
+def describe_stamp(stamp: float) -> str:
+    """A stamp as the operator reads it: clock time for wall-clock stamps, else seconds."""
+    if stamp > 1e9:  # seconds since 1970: a live site
+        return time.strftime("%H:%M:%S", time.localtime(stamp)) + f".{int(stamp % 1 * 10)}"
+    return f"t = {stamp:.2f} s"
 
 
 class TracksModel(QAbstractTableModel):
@@ -92,7 +100,9 @@ class TracksTable(QWidget):
         self.model.set_batch(batch)
         count = len(batch.tracks)
         people = "1 person" if count == 1 else f"{count} people"
-        self.caption.setText(f"{people} tracked at t = {batch.stamp:.2f} s (frame {batch.seq})")
+        self.caption.setText(
+            f"{people} tracked at {describe_stamp(batch.stamp)} (frame {batch.seq})"
+        )
 
     def set_site(self, description: str) -> None:
         """Shown until the first tracks arrive."""

@@ -58,6 +58,9 @@ __all__ = [
 CAMERA_DOWN = np.array([0.0, 1.0, 0.0])
 #: Nearer than this (metres) the camera counts as lying on the plane.
 MIN_CAMERA_HEIGHT = 1e-3
+#: Floor points a per-frame refit uses at most (a least-squares plane through a few
+#: thousand points is as good as through all, and far cheaper).
+FIT_POINTS = 4000
 
 
 class GroundError(UserError):
@@ -408,15 +411,17 @@ class GroundEstimator:
 
     def update(self, points: np.ndarray) -> np.ndarray:
         """Heights of the points above the floor, after refitting the floor to this
-        frame's floor points (unless locked or too few)."""
+        frame's floor points (unless locked or too few; OpenPTrack refits to its floor
+        voxels, here up to ``FIT_POINTS`` of the floor's points evenly spread)."""
         assert self.plane is not None, "initialise the ground first"
         heights = self.plane.distance(points)
         if self.params.lock_ground:
             return heights
-        inliers = np.abs(heights) < float(self.params.ground_inlier_distance)
-        if np.count_nonzero(inliers) >= max(update_min_points(self.params), 3):
+        inliers = np.flatnonzero(np.abs(heights) < float(self.params.ground_inlier_distance))
+        if len(inliers) >= max(update_min_points(self.params), 3):
+            step = max(1, len(inliers) // FIT_POINTS)
             try:
-                refit = Plane.fit(points[inliers]).oriented_towards((0.0, 0.0, 0.0))
+                refit = Plane.fit(points[inliers[::step]]).oriented_towards((0.0, 0.0, 0.0))
             except ValueError:
                 return heights
             if abs(refit.d) >= MIN_CAMERA_HEIGHT:

@@ -46,6 +46,10 @@ from optrack.types import Detection, DetectionBatch, Intrinsics, RGBDFrame
 
 __all__ = ["Judgement", "PeopleDetector"]
 
+#: Rows of a candidate's window sampled for its pixels (silhouette, histogram, occlusion):
+#: half the HOG window's 128, which the silhouette is upsampled from.
+CROP_ROWS = 64
+
 
 @dataclasses.dataclass
 class Judgement:
@@ -152,7 +156,6 @@ class PeopleDetector:
         )
         if p.apply_denoising:
             points = denoise(points, int(p.mean_k_denoising), float(p.std_dev_denoising))
-        voxels = voxel_grid(points, float(p.voxel_size))
         self.last_judgements = []
         frame_id = "world" if self.world_T_camera is not None else "ground"
 
@@ -168,14 +171,20 @@ class PeopleDetector:
                 processing_ms=(time.perf_counter() - started) * 1000.0,
             )
 
-        if not self.ground.initialise(voxels, len(points) / max(sampled, 1)):
-            return batch([])
-        heights = self.ground.update(voxels)
+        if not self.ground.ready:
+            voxels = voxel_grid(points, float(p.voxel_size))
+            if not self.ground.initialise(voxels, len(points) / max(sampled, 1)):
+                return batch([])
+        # Floor removal before the voxel grid (the same points go as after it, and the
+        # floor, most of a frame, is not voxelised), and the floor refit on them.
+        heights = self.ground.update(points)
         plane = self.ground.plane
         assert plane is not None
-        foreground = voxels[heights > float(p.ground_inlier_distance)]
+        top = float(p.max_height) + float(p.cluster_tolerance) * float(p.voxel_size)
+        above = (heights > float(p.ground_inlier_distance)) & (heights < top)
+        foreground = voxel_grid(np.compress(above, points, axis=0), float(p.voxel_size))
         if p.background_subtraction:
-            if self.background.learning and self.background.learn(voxels, stamp):
+            if self.background.learning and self.background.learn(foreground, stamp):
                 pass  # still learning: this frame is detected without subtraction
             else:
                 foreground = foreground[self.background.foreground(foreground)]
@@ -255,7 +264,7 @@ class PeopleDetector:
         # The candidate's pixels: a strided crop of its window, in the ground frame.
         rows_img, cols_img = cloud.shape
         person_px = abs(float(pixels[1][1] - pixels[0][1]))
-        stride = max(1, round(person_px / fill / HOG_WINDOW[1]))
+        stride = max(1, round(person_px / fill / CROP_ROWS))
         u0, v0, u1, v1 = window_footprint(to_depth, cloud.shape)
         if u1 > u0 and v1 > v0:
             crop_c = cloud.grid(slice(v0, v1, stride), slice(u0, u1, stride))

@@ -154,8 +154,11 @@ class Node:
         """React to changed values (raise a UserError to refuse them)."""
 
     def report_error(self, sentence: str) -> None:
+        """Keep the sentence for the status; log it unless it repeats the last one (a
+        flood of the same bad request is logged once)."""
+        if sentence != self.last_error:
+            self.log.warning("%s", sentence)
         self.last_error = sentence
-        self.log.warning("%s", sentence)
 
     # ---------------------------------------------------------------- status
     def status_fields(self) -> dict[str, Any]:

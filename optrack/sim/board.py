@@ -44,6 +44,9 @@ __all__ = [
 ]
 
 PROGRESS = 0.1  # m: walking nearer by less than this is no progress
+TREMOR = ((3.1, 0.0), (2.3, 1.0), (1.7, 2.0))  # rad/s and phase of the hand tremor per axis
+BACK_ALBEDO, BACK_INFRARED = (0.3, 0.3, 0.3), 0.3  # the unprinted back and edges
+TURN_SECONDS = 1.5  # planning allowance for starting, stopping and turning at a spot
 LINE_OF_SIGHT_TFAR = 0.995  # a board corner hidden before 99.5 % of the way counts as hidden
 
 BOARD_PARAMS = register(
@@ -241,7 +244,7 @@ class Checkerboard:
         p = self.params
         self.materials = [
             Material("board_face", (p.white,) * 3, p.white_infrared, checker=True),
-            Material("board_back", (0.3, 0.3, 0.3), 0.3),
+            Material("board_back", BACK_ALBEDO, BACK_INFRARED),
         ]
 
     @property
@@ -543,9 +546,7 @@ class Operator(Behaviour):
                 self._enter("hold", t, step.world_T_board)
             return None, 0.0
         if self.phase == "hold":
-            sway = p.sway_m * np.array(
-                [math.sin(3.1 * t), math.sin(2.3 * t + 1.0), math.sin(1.7 * t + 2.0)]
-            )
+            sway = p.sway_m * np.array([math.sin(rate * t + phase) for rate, phase in TREMOR])
             self.pose_now = step.world_T_board.copy()
             if not self.on_floor:
                 self.pose_now[:3, 3] += sway
@@ -600,7 +601,7 @@ class Operator(Behaviour):
         """A rough duration of the whole procedure (walking plus every phase)."""
         p, total, here = self.params, 0.0, np.asarray(start)
         for step in self.steps:
-            total += np.linalg.norm(step.operator_spot - here) / p.operator_speed + 1.5
+            total += np.linalg.norm(step.operator_spot - here) / p.operator_speed + TURN_SECONDS
             here = step.operator_spot
             total += p.hold_seconds + (
                 p.raise_seconds if step.kind == "hold" else 2 * p.lay_seconds

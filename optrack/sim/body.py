@@ -132,6 +132,11 @@ TOE_FORWARD = 0.11  # ankle to toe, along the foot
 THIGH = HIP_Z - KNEE_Z
 SHIN = KNEE_Z - ANKLE_Z
 
+MAX_GAIT_AMPLITUDE = 1.2  # a brisk walk swings a little more than a normal one
+TOE_LIFT = 0.02  # the toe sits this fraction of H below the ankle...
+TOE_CLEARANCE = 0.005  # ...but never below this height above the floor, m
+HAND_REACH = 0.8  # the hand segment ends at this share of the hand length
+
 # Materials of a person, in this order in the material table.
 SKIN, HAIR, SHIRT, TROUSERS, SHOES = range(5)
 MATERIALS_PER_PERSON = 5
@@ -241,7 +246,7 @@ class BodyModel:
         H = np.asarray(pose.height, dtype=np.float64)[:, None]
         n = len(H)
         phase = np.asarray(pose.phase, dtype=np.float64)
-        amp = np.clip(np.asarray(pose.amplitude, dtype=np.float64), 0.0, 1.5)
+        amp = np.clip(np.asarray(pose.amplitude, dtype=np.float64), 0.0, MAX_GAIT_AMPLITUDE)
         deg = np.pi / 180.0
         out = np.zeros((n, len(JOINTS), 3))
 
@@ -270,7 +275,7 @@ class BodyModel:
                 out[:, J[f"{name}_{side}"], 2] += hip_z
             toe = out[:, J[f"ankle_{side}"]].copy()
             toe[:, 0] += TOE_FORWARD * H[:, 0]
-            toe[:, 2] = np.maximum(toe[:, 2] - 0.02 * H[:, 0], 0.005)
+            toe[:, 2] = np.maximum(toe[:, 2] - TOE_LIFT * H[:, 0], TOE_CLEARANCE)
             out[:, J[f"toe_{side}"]] = toe
         bob = hip_z - HIP_Z * H[:, 0]
 
@@ -303,7 +308,7 @@ class BodyModel:
             out[:, J[f"shoulder_{side}"]] = shoulder
             out[:, J[f"elbow_{side}"]] = elbow
             out[:, J[f"wrist_{side}"]] = wrist
-            out[:, J[f"hand_{side}"]] = wrist + fore * HAND * H * 0.8
+            out[:, J[f"hand_{side}"]] = wrist + fore * HAND * H * HAND_REACH
 
         # Body frame -> world.
         rotation = _rot_z(np.asarray(pose.heading, dtype=np.float64))
@@ -344,18 +349,15 @@ class BodyModel:
                 fore = (wrist - elbow) / max(np.linalg.norm(wrist - elbow), 1e-9)
                 world[person, J[f"elbow_{side}"]] = elbow
                 world[person, J[f"wrist_{side}"]] = wrist
-                world[person, J[f"hand_{side}"]] = wrist + fore * HAND * H * 0.8
+                world[person, J[f"hand_{side}"]] = wrist + fore * HAND * H * HAND_REACH
 
     # ------------------------------------------------------------------ mesh
-    def part_boxes(self, vertices: np.ndarray) -> np.ndarray:
-        """Axis-aligned (min, max) boxes of every body part, (P * len(PARTS), 2, 3)."""
-        n = len(vertices)
-        heads = len(self._sph_v)
-        head = vertices[:, :heads]
-        limbs = vertices[:, heads:].reshape(n, len(CYLINDERS), len(self._cyl_v), 3)
-        lo = np.concatenate([head.min(axis=1)[:, None], limbs.min(axis=2)], axis=1)
-        hi = np.concatenate([head.max(axis=1)[:, None], limbs.max(axis=2)], axis=1)
-        return np.stack([lo, hi], axis=2).reshape(-1, 2, 3)
+    @property
+    def part_starts(self) -> np.ndarray:
+        """Index of each body part's first vertex within one person's vertices (the parts'
+        vertices are contiguous: the head, then each limb)."""
+        heads, limb = len(self._sph_v), len(self._cyl_v)
+        return np.concatenate([[0], heads + limb * np.arange(len(CYLINDERS))])
 
     def vertices(self, joints: np.ndarray, pose: BodyPose) -> np.ndarray:
         """Mesh vertices of every body, (P, vertices_per_person, 3), world frame."""

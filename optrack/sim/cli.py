@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from optrack.cli import emit_json, info
+from optrack.params import load_config
 from optrack.sim.recorder import ProgressBar, write_recording
 from optrack.sim.world import Simulation
 
@@ -12,6 +13,7 @@ __all__ = ["cmd_sim"]
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
+    params = load_config(args.config) if getattr(args, "config", None) else None
     sim = Simulation(
         args.scenario,
         seed=args.seed,
@@ -19,12 +21,18 @@ def cmd_sim(args: argparse.Namespace) -> int:
         sensors=args.sensors,
         sensor_model=args.sensor_model,
         seconds=args.seconds,
+        params=params,
     )
     bar = ProgressBar(
         f"sim {sim.scenario.name}", sum(sim.frame_count(k) for k in range(len(sim.sensors)))
     )
     try:
-        counts = write_recording(sim, args.out, progress=lambda done, total: bar.update(done))
+        counts = write_recording(
+            sim,
+            args.out,
+            progress=lambda done, total: bar.update(done),
+            params=params.get("recording") if params else None,
+        )
     finally:
         bar.close()
     frames = sum(counts.values())

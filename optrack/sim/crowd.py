@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from optrack.params import Param, Params, Schema, register
-from optrack.sim.body import BODY_PARAMS, MATERIALS_PER_PERSON, BodyPose
+from optrack.sim.body import BODY_PARAMS, MATERIALS_PER_PERSON, MAX_GAIT_AMPLITUDE, BodyPose
 from optrack.sim.materials import Material
 from optrack.sim.scenario import PeopleSpec
 from optrack.sim.venue import Venue
@@ -187,6 +187,78 @@ CROWD_PARAMS = register(
                 "People start leaving after this fraction of the run.",
             ),
             Param(
+                "progress",
+                0.2,
+                0.01,
+                2.0,
+                0.01,
+                "m",
+                "Getting nearer a goal by less than this is no progress.",
+            ),
+            Param(
+                "still_speed",
+                0.25,
+                0.0,
+                1.0,
+                0.01,
+                "m/s",
+                "Slower than this counts as standing (the body keeps its heading).",
+            ),
+            Param(
+                "return_speed_factor",
+                0.5,
+                0.1,
+                1.0,
+                0.05,
+                "",
+                "Speed, as a share of their own, at which pushed standing people return.",
+            ),
+            Param(
+                "child_speed_factor",
+                0.85,
+                0.3,
+                1.5,
+                0.05,
+                "",
+                "Children's walking speed relative to adults'.",
+            ),
+            Param(
+                "crossing_reach",
+                0.4,
+                0.1,
+                0.5,
+                0.05,
+                "",
+                "Crossing routes reach this share of the area's smaller side from its centre.",
+            ),
+            Param(
+                "crossing_spread_deg",
+                35.0,
+                0.0,
+                90.0,
+                1.0,
+                "deg",
+                "Crossing routes meet at 90 degrees give or take this.",
+            ),
+            Param(
+                "leave_before",
+                0.95,
+                0.0,
+                1.0,
+                0.05,
+                "",
+                "People leave before this fraction of the run.",
+            ),
+            Param(
+                "min_stay",
+                1.0,
+                0.0,
+                600.0,
+                0.5,
+                "s",
+                "Shortest stay of someone who enters and leaves.",
+            ),
+            Param(
                 "clothes_texture",
                 0.15,
                 0.0,
@@ -223,7 +295,10 @@ TROUSER_COLORS = (
     (0.25, 0.3, 0.2),
 )
 SHOE_COLOR = (0.12, 0.11, 0.1)
+# Near-infrared albedos: skin reflects well at ~850 nm, hair and shoes poorly; fabric varies.
 SKIN_INFRARED, HAIR_INFRARED, SHOE_INFRARED = 0.55, 0.25, 0.2
+SHIRT_INFRARED, TROUSER_INFRARED = (0.25, 0.85), (0.2, 0.7)
+SHIRT_SATURATION, SHIRT_VALUE, TROUSER_SHADE = (0.3, 0.9), (0.25, 0.95), (0.8, 1.2)
 
 
 @dataclasses.dataclass
@@ -291,7 +366,7 @@ class Wander(Behaviour):
                 self.pause_until = t + crowd.rng.uniform(p.pause_min, p.pause_max)
             self._new(crowd, t)
             return None, 0.0
-        if dist < self.best - 0.2:
+        if dist < self.best - p.progress:
             self.best, self.best_t = dist, t
         elif t - self.best_t > p.stuck_seconds:
             self._new(crowd, t)
@@ -319,8 +394,8 @@ class Route(Behaviour):
         p = crowd.params
         target = self.points[self.next]
         dist = float(np.linalg.norm(target - crowd.pos[i]))
-        stuck = dist >= self.best - 0.2 and t - self.best_t > p.stuck_seconds
-        if dist < self.best - 0.2:
+        stuck = dist >= self.best - p.progress and t - self.best_t > p.stuck_seconds
+        if dist < self.best - p.progress:
             self.best, self.best_t = dist, t
         if dist < p.arrive_radius or stuck:
             self.next = (self.next + 1) % len(self.points)
@@ -341,7 +416,7 @@ class Stand(Behaviour):
 
     def goal(self, crowd: Crowd, i: int, t: float) -> tuple[np.ndarray | None, float]:
         if np.linalg.norm(crowd.pos[i] - self.spot) > crowd.params.arrive_radius:
-            return self.spot, crowd.people[i].speed * 0.5
+            return self.spot, crowd.people[i].speed * crowd.params.return_speed_factor
         return None, 0.0
 
     def facing(self, crowd: Crowd, i: int, t: float) -> float | None:
@@ -374,7 +449,7 @@ class Follow(Behaviour):
         )
         dist = float(np.linalg.norm(target - crowd.pos[i]))
         leader_speed = float(np.linalg.norm(crowd.vel[self.leader]))
-        if dist < crowd.params.arrive_radius * 0.5 and leader_speed < 0.2:
+        if dist < crowd.params.arrive_radius and leader_speed < crowd.params.still_speed:
             return None, 0.0
         speed = max(leader_speed, crowd.people[i].speed * min(1.0, dist))
         return target, speed
@@ -445,7 +520,9 @@ class Crowd:
                         p.adult_height_max,
                     )
                 )
-        speed = self.rng.uniform(p.speed_min, p.speed_max) * (0.85 if child else 1.0)
+        speed = self.rng.uniform(p.speed_min, p.speed_max) * (
+            p.child_speed_factor if child else 1.0
+        )
         index = len(self.people)
         self.people.append(
             Person(index, float(height), float(speed), self._clothes(index), behaviour, child)
@@ -454,9 +531,12 @@ class Crowd:
 
     def _clothes(self, index: int) -> list[Material]:
         rng, texture = self.rng, float(self.params.clothes_texture)
-        shirt = colorsys.hsv_to_rgb(rng.random(), rng.uniform(0.3, 0.9), rng.uniform(0.25, 0.95))
+        shirt = colorsys.hsv_to_rgb(
+            rng.random(), rng.uniform(*SHIRT_SATURATION), rng.uniform(*SHIRT_VALUE)
+        )
         trousers = np.clip(
-            np.array(TROUSER_COLORS[rng.integers(len(TROUSER_COLORS))]) * rng.uniform(0.8, 1.2),
+            np.array(TROUSER_COLORS[rng.integers(len(TROUSER_COLORS))])
+            * rng.uniform(*TROUSER_SHADE),
             0,
             1,
         )
@@ -465,8 +545,10 @@ class Crowd:
         materials = [
             Material(f"skin{index}", skin, SKIN_INFRARED, texture / 3),
             Material(f"hair{index}", hair, HAIR_INFRARED, texture),
-            Material(f"shirt{index}", tuple(shirt), float(rng.uniform(0.25, 0.85)), texture),
-            Material(f"trousers{index}", tuple(trousers), float(rng.uniform(0.2, 0.7)), texture),
+            Material(f"shirt{index}", tuple(shirt), float(rng.uniform(*SHIRT_INFRARED)), texture),
+            Material(
+                f"trousers{index}", tuple(trousers), float(rng.uniform(*TROUSER_INFRARED)), texture
+            ),
             Material(f"shoes{index}", SHOE_COLOR, SHOE_INFRARED, texture),
         ]
         assert len(materials) == MATERIALS_PER_PERSON
@@ -504,7 +586,7 @@ class Crowd:
             for k in range(1, size):
                 side = 1 if k % 2 else -1
                 offset = np.array(
-                    [-(k // 2) * p.group_spacing, side * p.group_spacing * (1 + k // 2) * 0.7]
+                    [-(k // 2) * p.group_spacing, side * p.group_spacing * ((k + 1) // 2)]
                 )
                 self.add(Follow(leader, offset), child=child())
             left = count - added()
@@ -514,12 +596,13 @@ class Crowd:
             center = np.array(
                 [(self.area[0] + self.area[2]) / 2, (self.area[1] + self.area[3]) / 2]
             )
-            reach = 0.4 * min(self.area[2] - self.area[0], self.area[3] - self.area[1])
+            reach = p.crossing_reach * min(self.area[2] - self.area[0], self.area[3] - self.area[1])
             # Two routes across the centre at about right angles, ends on free floor.
             best, best_clearance = None, -math.inf
             for _ in range(CROSSING_TRIES):
                 angle = rng.uniform(0, math.pi)
-                turn = math.pi / 2 + rng.uniform(-0.6, 0.6)
+                spread = math.radians(p.crossing_spread_deg)
+                turn = math.pi / 2 + rng.uniform(-spread, spread)
                 ends = [
                     reach * np.array([math.cos(angle + a), math.sin(angle + a)])
                     for a in (0.0, turn)
@@ -537,8 +620,8 @@ class Crowd:
         for k in range(min(spec.enter_leave, left)):
             door = doors[k % len(doors)]
             enter = rng.uniform(0.0, p.enter_window * duration)
-            leave = rng.uniform(p.leave_after, 0.95) * duration
-            self.add(EnterLeave(door, enter, max(leave, enter + 1.0)), child=child())
+            leave = rng.uniform(p.leave_after, p.leave_before) * duration
+            self.add(EnterLeave(door, enter, max(leave, enter + p.min_stay)), child=child())
         left = count - added()
         for _ in range(left):
             self.add(Wander(), child=child())
@@ -669,7 +752,7 @@ class Crowd:
             axis=1,
         )
         vel = vel + force * dt
-        top = np.maximum(speeds[idx], 0.3) * p.max_speed_factor
+        top = np.maximum(speeds[idx], p.still_speed) * p.max_speed_factor
         norm = np.linalg.norm(vel, axis=1)
         vel *= np.minimum(1.0, top / np.maximum(norm, 1e-9))[:, None]
         pos = pos + vel * dt
@@ -679,7 +762,7 @@ class Crowd:
         speed = np.linalg.norm(vel, axis=1)
         for k, i in enumerate(idx):
             target = None
-            if speed[k] > 0.25:
+            if speed[k] > p.still_speed:
                 target = math.atan2(vel[k, 1], vel[k, 0])
             else:
                 target = self.people[i].behaviour.facing(self, i, t)
@@ -690,7 +773,7 @@ class Crowd:
         heights = np.array([self.people[i].height for i in idx])
         stride = self.body_params.stride_per_height * heights
         self.phase[idx] = (self.phase[idx] + 2 * math.pi * speed * dt / stride) % (2 * math.pi)
-        target_amp = np.clip(speed / self.body_params.full_gait_speed, 0.0, 1.2)
+        target_amp = np.clip(speed / self.body_params.full_gait_speed, 0.0, MAX_GAIT_AMPLITUDE)
         self.amp[idx] += (target_amp - self.amp[idx]) * min(1.0, dt / p.relax_time)
 
     # ------------------------------------------------------------- reading

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from typing import TextIO
 
 from optrack import __version__
+from optrack.params import Params
 from optrack.recording import RecordingWriter
 from optrack.sim.world import Simulation
 
@@ -57,12 +58,14 @@ def write_recording(
     *,
     noise: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    params: Params | None = None,
 ) -> dict[str, int]:
     """Render every sensor's frames in time order into a new recording at ``path``,
     with ground truth at each capture instant; returns frames per sensor.
 
     Frames are rendered in the world at their true capture time; their
     timestamps are on each sensor's own clock (offset and jitter included).
+    ``params`` are the ``recording`` stage's (image encodings).
     """
     counts = [sim.frame_count(k) for k in range(len(sim.sensors))]
     total = sum(counts)
@@ -81,7 +84,12 @@ def write_recording(
     heapq.heapify(schedule)
     done = 0
     with RecordingWriter(
-        path, [s.info for s in sim.sensors], ground_truth=True, source="optrack sim", extra=extra
+        path,
+        [s.info for s in sim.sensors],
+        ground_truth=True,
+        source="optrack sim",
+        extra=extra,
+        params=params,
     ) as writer:
         state, state_t = None, None
         while schedule:

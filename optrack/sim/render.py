@@ -105,8 +105,9 @@ class DynamicGeometry:
     """Everything that moves at one instant, as one mesh.
 
     ``boxes[k]`` is the axis-aligned (min, max) box of owner k (a person, or
-    the board, last); ``part_boxes`` are the tighter boxes of the body parts
-    (and the board), which decide the rays a frame casts.
+    the board, last). The vertices come in contiguous blocks, one per rigid part
+    (a body part, the board), starting at ``part_starts``; the image rectangles
+    of the parts decide the rays a frame casts.
     """
 
     vertices: np.ndarray
@@ -116,7 +117,7 @@ class DynamicGeometry:
     triangle_texture: np.ndarray
     materials: MaterialTable
     boxes: np.ndarray
-    part_boxes: np.ndarray
+    part_starts: np.ndarray
     board: Checkerboard | None = None
     world_T_board: np.ndarray | None = None
     _scene: o3d.t.geometry.RaycastingScene | None = None
@@ -202,6 +203,7 @@ class SensorRenderer:
         rays = np.concatenate([origin, world_dirs], axis=-1)
         self.rays = np.ascontiguousarray(rays.reshape(-1, 6), dtype=np.float32)  # flat, row-major
         self.ray_scale = np.linalg.norm(camera_dirs, axis=-1).astype(np.float32)
+        self._ray_norm = self.ray_scale.ravel()  # |direction| per flat pixel (rotation keeps it)
         self.second_origin = (
             None
             if second_view is None
@@ -223,7 +225,7 @@ class SensorRenderer:
         normals = hit["primitive_normals"].numpy()[index]
         directions = self.rays[index, 3:]
         cos = np.zeros(t.shape, dtype=np.float32)
-        cos[index] = self._cos(normals, directions)
+        cos[index] = self._cos(normals, directions, index)
         radiance = infrared = blocked = None
         if self.want_radiance or self.want_infrared:
             material = self.static.triangle_material[hit["primitive_ids"].numpy()[index]]
@@ -255,10 +257,10 @@ class SensorRenderer:
             second_view_blocked=blocked,
         )
 
-    @staticmethod
-    def _cos(normals: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    def _cos(self, normals: np.ndarray, directions: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """|cos| of the angle between surface normals and the rays of pixels ``index``."""
         dot = np.abs(np.einsum("ij,ij->i", normals, directions))
-        return (dot / np.linalg.norm(directions, axis=1)).astype(np.float32)
+        return (dot / self._ray_norm[index]).astype(np.float32)
 
     def _blocked(
         self, scene: o3d.t.geometry.RaycastingScene, index: np.ndarray, depth: np.ndarray
@@ -278,34 +280,33 @@ class SensorRenderer:
         return blocked.numpy().astype(bool)
 
     # -------------------------------------------------------------- frames
-    def pixels(self, boxes: np.ndarray, widen: bool = False) -> np.ndarray:
-        """Flat indices of the pixels whose rays can meet any of the (min, max) ``boxes``:
-        the union of the boxes' image rectangles. ``widen`` adds the second view's
-        disparity sideways (the pixels whose second-view ray can pass a box)."""
-        boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 2, 3)
-        if len(boxes) == 0:
+    def pixels(self, dynamic: DynamicGeometry, widen: bool = False) -> np.ndarray:
+        """Flat indices of the pixels whose rays can meet the moving meshes: the union of
+        the image rectangles bounding each part's projected vertices (parts are convex,
+        so a rectangle holds the whole projected part). ``widen`` adds the second view's
+        disparity sideways (pixels whose second-view ray can pass a part)."""
+        starts = dynamic.part_starts
+        if len(starts) == 0:
             return np.zeros(0, dtype=np.int64)
         k, near = self.intrinsics, float(self.params.near_clip)
-        pick = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
-        corners = boxes[:, pick, [0, 1, 2]]  # (B, 8, 3)
-        camera = corners @ self.camera_T_world[:3, :3].T + self.camera_T_world[:3, 3]
-        z = camera[..., 2]
-        behind = np.all(z <= near, axis=1)
-        straddle = np.any(z <= near, axis=1) & ~behind
+        camera = dynamic.vertices @ self.camera_T_world[:3, :3].T.astype(np.float32)
+        camera += self.camera_T_world[:3, 3].astype(np.float32)
+        z = camera[:, 2]
+        z_min = np.minimum.reduceat(z, starts)
+        if np.any((z_min <= near) & (np.maximum.reduceat(z, starts) > near)):
+            return np.arange(self.width * self.height)  # a part straddles the camera plane
         with np.errstate(divide="ignore", invalid="ignore"):
-            u = k.fx * camera[..., 0] / z + k.cx
-            v = k.fy * camera[..., 1] / z + k.cy
-        pad = np.zeros(len(boxes))
+            u = k.fx * camera[:, 0] / z + k.cx
+            v = k.fy * camera[:, 1] / z + k.cy
+        pad = np.zeros(len(starts))
         if widen and self.second_view is not None:
-            pad = np.ceil(k.fx * abs(self.second_view) / np.maximum(z.min(axis=1), near))
-        u0 = np.clip(np.floor(u.min(axis=1)) - 1 - pad, 0, self.width).astype(int)
-        u1 = np.clip(np.ceil(u.max(axis=1)) + 2 + pad, 0, self.width).astype(int)
-        v0 = np.clip(np.floor(v.min(axis=1)) - 1, 0, self.height).astype(int)
-        v1 = np.clip(np.ceil(v.max(axis=1)) + 2, 0, self.height).astype(int)
-        if straddle.any():
-            return np.arange(self.width * self.height)
+            pad = np.ceil(k.fx * abs(self.second_view) / np.maximum(z_min, near))
+        u0 = np.clip(np.floor(np.minimum.reduceat(u, starts)) - 1 - pad, 0, self.width).astype(int)
+        u1 = np.clip(np.ceil(np.maximum.reduceat(u, starts)) + 2 + pad, 0, self.width).astype(int)
+        v0 = np.clip(np.floor(np.minimum.reduceat(v, starts)) - 1, 0, self.height).astype(int)
+        v1 = np.clip(np.ceil(np.maximum.reduceat(v, starts)) + 2, 0, self.height).astype(int)
         mask = np.zeros(self.shape, dtype=bool)
-        for b in np.flatnonzero(~behind & (u0 < u1) & (v0 < v1)):
+        for b in np.flatnonzero((z_min > near) & (u0 < u1) & (v0 < v1)):
             mask[v0[b] : v1[b], u0[b] : u1[b]] = True
         return np.flatnonzero(mask)
 
@@ -349,7 +350,7 @@ class SensorRenderer:
     ) -> np.ndarray:
         """Cast the rays that can meet moving things; update the flat images where they
         hit something nearer than the venue. Returns the flat indices updated."""
-        candidates = self.pixels(dynamic.part_boxes)
+        candidates = self.pixels(dynamic)
         if len(candidates) == 0:
             return candidates
         rays = self.rays[candidates]
@@ -364,7 +365,7 @@ class SensorRenderer:
         normals = hit["primitive_normals"].numpy()[nearer]
         directions = rays[nearer, 3:]
         depth[index] = tt
-        cos[index] = self._cos(normals, directions)
+        cos[index] = self._cos(normals, directions, index)
         labels[index] = dynamic.triangle_owner[prim]
         if radiance is None and infrared is None:
             return index
@@ -378,7 +379,7 @@ class SensorRenderer:
             board = dynamic.board
             points = rays[nearer[checker], :3] + tt[checker, None] * directions[checker]
             local = transform_points(invert(dynamic.world_T_board), points)
-            ranges = tt[checker] * np.linalg.norm(directions[checker], axis=1)
+            ranges = tt[checker] * self._ray_norm[index[checker]]
             footprint = ranges / self.intrinsics.fx / np.maximum(cos[index[checker]], 0.2)
             white = board.reflectance(local[:, :2], footprint)
             p = board.params
@@ -396,6 +397,6 @@ class SensorRenderer:
         """Recompute second-view blocking where the moving meshes can matter: their
         own pixels (against the venue) and every pixel near them (against them)."""
         blocked[moving] = self._blocked(self.static.scene, moving, depth)
-        near = self.pixels(dynamic.part_boxes, widen=True)
+        near = self.pixels(dynamic, widen=True)
         near = near[np.isfinite(depth[near])]
         blocked[near] |= self._blocked(dynamic.scene, near, depth)

@@ -70,13 +70,22 @@ SIM_PARAMS = register(
             ),
             Param("max_people", 100, 1, 1000, 1, "", "Most people a simulation accepts."),
             Param("max_sensors", 16, 1, 64, 1, "", "Most sensors a simulation accepts."),
+            Param(
+                "max_seconds",
+                3600.0,
+                1.0,
+                86400.0,
+                1.0,
+                "s",
+                "Longest simulation a command accepts.",
+            ),
             Param("truth_decimals", 4, 1, 9, 1, "", "Decimals kept in ground-truth coordinates."),
         ],
         help="The simulated venue: sensor placement and ground truth.",
     )
 )
 
-BOARD_OWNER_MATERIALS = 2
+JITTER_LIMIT = 0.25  # jitter is clipped to this fraction of a frame period (stamps stay ordered)
 
 
 @dataclasses.dataclass
@@ -203,8 +212,10 @@ class Simulation:
             raise ScenarioError(
                 f"--sensor-model must be one of {', '.join(MODELS)}; got '{model}'."
             )
-        if seconds is not None and not (0 < seconds <= 3600 and math.isfinite(seconds)):
-            raise ScenarioError(f"--seconds must be above 0 and at most 3600; got {seconds}.")
+        if seconds is not None and not (0 < seconds <= p.max_seconds and math.isfinite(seconds)):
+            raise ScenarioError(
+                f"--seconds must be above 0 and at most {p.max_seconds:g}; got {seconds}."
+            )
 
     def _place_sensors(
         self,
@@ -337,13 +348,14 @@ class Simulation:
         triangles, material, owner, texture, table = self._layout
         flat = vertices.reshape(-1, 3)
         boxes = list(np.stack([vertices.min(axis=1), vertices.max(axis=1)], axis=1))
-        part_boxes = [body.part_boxes(vertices)] if count else []
+        per_person = body.vertices_per_person
+        starts = [(body.part_starts + k * per_person) for k in range(count)]
         if with_board:
             board_vertices = transform_points(board_pose, self.board.vertices)
             flat = np.concatenate([flat, board_vertices])
             board_box = np.stack([board_vertices.min(axis=0), board_vertices.max(axis=0)])
             boxes.append(board_box)
-            part_boxes.append(board_box[None])
+            starts.append(np.array([count * per_person]))
         return DynamicGeometry(
             vertices=flat.astype(np.float32),
             triangles=triangles,
@@ -352,7 +364,7 @@ class Simulation:
             triangle_texture=texture,
             materials=table,
             boxes=np.array(boxes).reshape(-1, 2, 3),
-            part_boxes=np.concatenate(part_boxes) if part_boxes else np.zeros((0, 2, 3)),
+            part_starts=np.concatenate(starts) if starts else np.zeros(0, dtype=np.int64),
             board=self.board if with_board else None,
             world_T_board=board_pose if with_board else None,
         )
@@ -390,7 +402,7 @@ class Simulation:
         capture time plus the sensor's clock offset and jitter (never going back)."""
         sensor = self.sensors[index]
         rng = self._generator(self._jitter, index, 1)
-        limit = 0.25 / sensor.model.fps
+        limit = JITTER_LIMIT / sensor.model.fps
         jitter = float(np.clip(rng.normal(0.0, sensor.model.jitter), -limit, limit))
         return sensor.frame_time(n) + sensor.clock_offset + jitter
 

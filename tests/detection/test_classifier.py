@@ -11,8 +11,9 @@ from optrack.detection.classifier import (
     equalised_infrared,
     hsv_histogram,
     luminance,
+    level_window,
     person_window,
-    window_geometry,
+    window_footprint,
 )
 
 
@@ -32,28 +33,47 @@ def test_confidence_is_the_score_opencvs_own_detector_gives(shared_data):
         assert score == pytest.approx(float(np.ravel(weights)[0]), abs=1e-3)
 
 
-def test_window_follows_pcls_geometry():
-    # A person 300 px tall centred at (320, 240): window 400 px tall, 200 wide.
-    box = window_geometry(np.array([320, 90]), np.array([320, 390]), np.array([320, 240]), 0.75)
-    assert box == (220, 40, 200, 400)
+def window_coordinates(to_image, points, K):
+    """Window pixel (u, v) of camera-frame points."""
+    pixels = (points @ K.T)[:, :2] / points[:, 2:3]
+    back = np.c_[pixels, np.ones(len(pixels))] @ np.linalg.inv(to_image).T
+    return back[:, :2] / back[:, 2:3]
+
+
+@pytest.mark.parametrize("tilt_deg", [0.0, 30.0])
+def test_person_stands_upright_in_the_middle_of_the_window_whatever_the_tilt(tilt_deg):
+    K = np.array([[365.5, 0, 254.9], [0, 365.5, 205.4], [0, 0, 1.0]])
+    t = np.radians(tilt_deg)
+    up = np.array([0.0, -np.cos(t), -np.sin(t)])  # the floor's normal, camera frame
+    forward = np.cross(up, [1.0, 0, 0])  # horizontal, away from the camera
+    foot = 2.6 * -up + 4.0 * forward / np.linalg.norm(forward) + [1.5, 0, 0] @ np.eye(3)
+    head = foot + 1.8 * up
+    center = foot + 0.9 * up
+    to_image = level_window(center, 1.8, up, K, 0.75)
+    (hu, hv), (fu, fv), (cu, cv_) = window_coordinates(to_image, np.stack([head, foot, center]), K)
+    assert hu == pytest.approx(31.5, abs=1e-6) and fu == pytest.approx(31.5, abs=1e-6)
+    assert cv_ == pytest.approx(63.5, abs=1e-6)
+    assert fv - hv == pytest.approx(0.75 * 128, abs=1e-6)  # PCL's fill of the window
 
 
 def test_window_is_black_outside_the_image_and_samples_inside():
     image = np.full((480, 640, 3), 200, np.uint8)
-    inside = person_window(image, (100, 100, 64, 128))
-    assert inside.shape == (128, 64, 3) and np.all(inside == 200)
-    half_out = person_window(image, (-32, 0, 64, 128))
+    shift = np.array([[1.0, 0, 100], [0, 1.0, 100], [0, 0, 1]])  # window = pixels 100..
+    assert np.all(person_window(image, shift) == 200)
+    half_out = person_window(image, np.array([[1.0, 0, -32], [0, 1.0, 0], [0, 0, 1]]))
     assert np.all(half_out[:, :31] == 0) and np.all(half_out[:, 33:] == 200)
-    assert np.all(person_window(image, (1000, 1000, 64, 128)) == 0)
+    far = np.array([[1.0, 0, 1000], [0, 1.0, 1000], [0, 0, 1]])
+    assert np.all(person_window(image, far) == 0)
+    assert window_footprint(shift, (480, 640)) == (100, 100, 164, 228)
 
 
 def test_window_of_a_strided_crop_matches_the_full_image():
     rng = np.random.default_rng(0)
     image = cv2.GaussianBlur(rng.integers(0, 256, (480, 640), dtype=np.uint8), (0, 0), 6)
-    box = (100, 50, 150, 300)
-    full = person_window(image, box).astype(int)
+    scale = np.array([[150 / 64, 0, 100], [0, 300 / 128, 50], [0, 0, 1]])
+    full = person_window(image, scale).astype(int)
     crop = image[50:350:2, 100:250:2]
-    strided = person_window(crop, box, origin=(100, 50), stride=2).astype(int)
+    strided = person_window(crop, scale, origin=(100, 50), stride=2).astype(int)
     assert np.abs(full - strided)[2:-2, 2:-2].mean() < 3
 
 

@@ -17,13 +17,15 @@ def test_schema_is_registered_with_openptracks_generic_defaults():
         2.3,
         0.3,
     )
-    assert (p.minimum_luminance, p.min_confidence, p.max_distance) == (120, -1.75, 15.0)
+    assert (p.minimum_luminance, p.max_distance) == (120, 15.0)
+    # OpenPTrack's -1.75 / -2.0 were for PCL's SVM; OpenCV's scores run lower (params.py).
+    assert p.min_confidence == -3.0
     assert (p.background_resolution, p.background_seconds) == (0.3, 3.0)
 
 
 @pytest.mark.parametrize(
     ("model", "sampling", "max_distance", "min_confidence"),
-    [("kinect1", 4, 5.0, -1.75), ("kinect2", 4, 10.0, -1.75), ("sr4500", 1, 10.0, -2.0)],
+    [("kinect1", 4, 5.0, -3.0), ("kinect2", 2, 10.0, -3.0), ("sr4500", 1, 10.0, -3.25)],
 )
 def test_sensor_models_get_openptracks_values(model, sampling, max_distance, min_confidence):
     p = detection_params(model)

@@ -95,3 +95,14 @@ def test_output_directory_must_be_new(tmp_path, capsys):
     (out / "something").write_text("x")
     assert main(["sim", "mixed", "--out", str(out), "--seconds", "0.1"]) == 1
     assert "already exists" in capsys.readouterr().err
+
+
+def test_config_file_sets_sensor_parameters(tmp_path):
+    config = tmp_path / "params.yaml"
+    config.write_text("sim_kinect1:\n  resolution: 320x240\n", encoding="utf-8")
+    code, _ = _sim(
+        tmp_path / "low", "--sensors", "1", "--sensor-model", "kinect1", "--config", str(config)
+    )
+    assert code == 0
+    frame = next(Recording(tmp_path / "low").frames())
+    assert frame.depth.shape == (240, 320) and frame.color.shape == (240, 320, 3)

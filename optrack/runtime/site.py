@@ -1,0 +1,476 @@
+"""``optrack run``: a whole site on this computer, one process per node.
+
+The launcher hosts the site's bus hub (a Zenoh router on
+``tcp/127.0.0.1:<bus.local_port>``, loopback only), then starts as child
+processes one detector node per sensor, the tracker node and the outputs
+node, all connecting to the hub. Without ``site.sensors`` the sensors are
+the embedded venue: the simulated ``site.scenario`` (``mixed``: three
+Kinect v2, four to six people) rendered once into a cache (live ray casting
+cannot keep 3 x 30 Hz on a 2-core computer) and looped by each detector as
+a live camera.
+
+It supervises the children: one that stops unexpectedly is reported (on
+stderr and in the ``site`` status on the bus) and restarted after
+``site.restart_delay_s`` (longer when it keeps failing at start); a
+detector whose recording ended is not. Ctrl-C (or ``--seconds``) stops
+the detectors, then the tracker, then the outputs, each with SIGTERM, and
+kills what has not ended after ``site.stop_timeout_s``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from optrack.errors import UserError
+from optrack.net.bus import Bus
+from optrack.net.keys import check_name
+from optrack.net.messages import StatusMessage
+from optrack.params import Params, save_config
+from optrack.runtime.config import NodeConfig, state_dir
+from optrack.runtime.node import PARENT_ENV
+
+__all__ = ["Child", "Site", "SiteError", "venue_recording"]
+
+log = logging.getLogger("optrack.runtime.site")
+
+QUICK_FAILURE_S = 10.0  # a child that dies sooner than this after starting backs off
+
+
+class SiteError(UserError):
+    """A site that cannot start."""
+
+
+@dataclasses.dataclass
+class Child:
+    """One node process of the site."""
+
+    name: str
+    role: str  # detector, tracker, outputs, gui
+    argv: list[str]
+    process: subprocess.Popen[bytes] | None = None
+    state: str = "new"  # running, waiting (to restart), ended, stopped
+    started_at: float = 0.0
+    restart_at: float = 0.0
+    restarts: int = 0
+    delay: float = 0.0
+    last_exit: int | None = None
+
+    @property
+    def label(self) -> str:
+        return {
+            "detector": f"detector node '{self.name}'",
+            "tracker": "tracker node",
+            "outputs": "outputs node",
+            "gui": "operator application",
+        }[self.role]
+
+    @property
+    def pid(self) -> int | None:
+        return self.process.pid if self.process is not None else None
+
+
+def describe_exit(code: int) -> str:
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit status {code}"
+
+
+def _cache_root() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "optrack" / "venues"
+
+
+def venue_recording(scenario: str, seed: int, seconds: float, cache: Path | None = None) -> Path:
+    """The embedded venue's recording, rendered once (with a progress bar) and then reused."""
+    from optrack import __version__
+    from optrack.recording import is_recording
+    from optrack.sim.recorder import ProgressBar, write_recording
+    from optrack.sim.world import Simulation
+
+    name = f"{Path(scenario).stem}-seed{seed}-{seconds:g}s-v{__version__}"
+    path = (cache or _cache_root()) / name
+    done = path / ".complete"
+    if done.is_file() and is_recording(path):
+        return path
+    sim = Simulation(scenario, seed=seed, seconds=seconds)
+    total = sum(sim.frame_count(k) for k in range(len(sim.sensors)))
+    log.info(
+        "rendering the venue '%s' once (%d frames; later runs reuse %s)", scenario, total, path
+    )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    scratch = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=path.parent))
+    bar = ProgressBar(f"venue {sim.scenario.name}", total)
+    try:
+        write_recording(sim, scratch / "recording", progress=lambda n, _total: bar.update(n))
+        bar.close()
+        (scratch / "recording" / ".complete").write_text(__version__ + "\n", encoding="utf-8")
+        if path.exists():
+            shutil.rmtree(path)
+        os.replace(scratch / "recording", path)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    return path
+
+
+class Site:
+    """The local site launcher and supervisor (see the module docstring)."""
+
+    def __init__(
+        self,
+        config: NodeConfig,
+        udp: list[str] | None = None,
+        headless: bool = True,
+        seconds: float | None = None,
+    ) -> None:
+        self.config = config
+        self.params: Params = config["site"]
+        self.name = check_name("site", str(self.params.name))
+        if udp:
+            config["outputs"].update({"udp": ",".join(udp)})
+        if seconds is not None and not seconds > 0:
+            raise SiteError(f"--seconds must be > 0; got {seconds:g}.")
+        self.headless = headless
+        self.seconds = seconds
+        self.children: list[Child] = []
+        self.statuses: dict[str, StatusMessage] = {}
+        self.hub: Bus | None = None
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._run_dir: Path | None = None
+
+    # ---------------------------------------------------------------- setup
+    def sensor_uris(self) -> list[str]:
+        listed = [u.strip() for u in str(self.params.sensors).split(",") if u.strip()]
+        if listed:
+            return listed
+        path = venue_recording(
+            str(self.params.scenario), int(self.params.seed), float(self.params.venue_seconds)
+        )
+        from optrack.recording import Recording
+
+        return [f"file://{path}?loop=true#{sid}" for sid in Recording(path).sensor_ids]
+
+    def _write_configs(self, run_dir: Path) -> dict[str, Path]:
+        """The children's config files: the user's values, the hub to connect to, and only
+        the detection values the user set (each sensor model's defaults apply otherwise)."""
+        endpoint = f"tcp/127.0.0.1:{int(self.config['bus'].local_port)}"
+        common = {stage: params.as_dict() for stage, params in self.config.params.items()}
+        common["bus"].update(
+            {"mode": "client", "connect": endpoint, "multicast_scouting": False, "gossip": False}
+        )
+        common["node"]["state_dir"] = str(state_dir(self.config, self.name))
+        common["detection"] = dict(self.config.explicit.get("detection", {}))
+        paths = {}
+        for role in ("detector", "tracker", "outputs"):
+            values = {stage: dict(v) for stage, v in common.items()}
+            if role == "detector":
+                values["node"]["nice"] = int(self.params.detector_nice)
+            if role == "tracker":
+                values["node"]["outputs"] = False
+            paths[role] = run_dir / f"{role}.yaml"
+            save_config(paths[role], values)
+        return paths
+
+    def _children(self, uris: list[str], configs: dict[str, Path]) -> list[Child]:
+        from optrack.runtime.replay import LiveReplay  # noqa: F401 - fail early if broken
+        from optrack.sensors.uri import parse_uri
+
+        python = [sys.executable, "-m"]
+        children = []
+        seen: set[str] = set()
+        for k, uri in enumerate(uris):
+            parsed = parse_uri(uri)
+            name = parsed.sensor_id or parsed.fragment or f"sensor{k}"
+            if name in seen:
+                raise SiteError(
+                    f"two sensors of site.sensors are both named '{name}'; give each a unique "
+                    "id with ?id=NAME."
+                )
+            seen.add(name)
+            children.append(
+                Child(
+                    name,
+                    "detector",
+                    [
+                        *python,
+                        "optrack.cli",
+                        "node",
+                        "detect",
+                        "--sensor",
+                        uri,
+                        "--site",
+                        self.name,
+                        "--config",
+                        str(configs["detector"]),
+                    ],
+                )
+            )
+        children.append(
+            Child(
+                "tracker",
+                "tracker",
+                [
+                    *python,
+                    "optrack.cli",
+                    "node",
+                    "track",
+                    "--site",
+                    self.name,
+                    "--config",
+                    str(configs["tracker"]),
+                ],
+            )
+        )
+        children.append(
+            Child(
+                "outputs",
+                "outputs",
+                [
+                    *python,
+                    "optrack.runtime.outputs_node",
+                    "--site",
+                    self.name,
+                    "--config",
+                    str(configs["outputs"]),
+                ],
+            )
+        )
+        if not self.headless:
+            from app.display import display_problem
+
+            problem = display_problem()
+            if problem is None:
+                children.append(Child("gui", "gui", [*python, "optrack.cli", "gui"]))
+            else:
+                log.info("no window (%s); running headless.", problem)
+        return children
+
+    def _spawn(self, child: Child) -> None:
+        env = dict(os.environ)
+        env[PARENT_ENV] = str(os.getpid())
+        env["PYTHONUNBUFFERED"] = "1"
+        child.process = subprocess.Popen(
+            child.argv,
+            stdin=subprocess.DEVNULL,
+            stdout=sys.stderr.fileno(),
+            stderr=sys.stderr.fileno(),
+            env=env,
+            start_new_session=True,  # Ctrl-C reaches the launcher, which stops them in order
+        )
+        child.state = "running"
+        child.started_at = time.monotonic()
+
+    def start(self) -> None:
+        """Render/prepare the sensors, host the hub, start every node."""
+        uris = self.sensor_uris()
+        self.hub = Bus(self.name, "site", self.config["bus"], host=True)
+        self.hub.subscribe(self.hub.keys.status(), StatusMessage, self._on_status)
+        self._run_dir = Path(tempfile.mkdtemp(prefix="optrack-run-"))
+        configs = self._write_configs(self._run_dir)
+        self.children = self._children(uris, configs)
+        order = ("tracker", "outputs", "detector", "gui")  # the clock first
+        for role in order:
+            for child in self.children:
+                if child.role == role:
+                    self._spawn(child)
+        log.info(
+            "site '%s' on tcp/127.0.0.1:%d: %d detector node(s), tracker, outputs (%s)",
+            self.name,
+            int(self.config["bus"].local_port),
+            sum(c.role == "detector" for c in self.children),
+            ", ".join(self._outputs_described()) or "none",
+        )
+
+    def _outputs_described(self) -> list[str]:
+        out = self.config["outputs"]
+        found = []
+        if str(out.udp).strip():
+            found.append(f"UDP JSON to {out.udp}")
+        if str(out.osc).strip():
+            found.append(f"OSC to {out.osc}")
+        if str(out.websocket).strip():
+            found.append(f"WebSocket on {out.websocket}")
+        return found
+
+    def _on_status(self, message: StatusMessage, key: str) -> None:
+        with self._lock:
+            self.statuses[message.node] = message
+
+    # ----------------------------------------------------------- supervision
+    def supervise_once(self, now: float) -> None:
+        """Notice ended children, restart the ones due."""
+        for child in self.children:
+            if child.state == "running" and child.process is not None:
+                code = child.process.poll()
+                if code is None:
+                    continue
+                child.last_exit = code
+                if child.role == "gui":
+                    log.info("the operator application closed; stopping the site.")
+                    child.state = "ended"
+                    self._stop.set()
+                    continue
+                if code == 0 and child.role == "detector":
+                    child.state = "ended"
+                    log.info("%s ended: its sensor has no more frames.", child.label)
+                    continue
+                ran = now - child.started_at
+                base = float(self.params.restart_delay_s)
+                if ran < QUICK_FAILURE_S and child.restarts > 0:
+                    child.delay = min(
+                        max(child.delay * 2, base, 0.5), float(self.params.max_restart_delay_s)
+                    )
+                else:
+                    child.delay = base
+                child.state = "waiting"
+                child.restart_at = now + child.delay
+                log.warning(
+                    "%s stopped unexpectedly (%s) after %.1f s; restarting it in %.1f s.",
+                    child.label,
+                    describe_exit(code),
+                    ran,
+                    child.delay,
+                )
+                self.publish_status()
+            elif child.state == "waiting" and now >= child.restart_at:
+                self._spawn(child)
+                child.restarts += 1
+                log.info(
+                    "restarted %s (restart %d, pid %s).", child.label, child.restarts, child.pid
+                )
+                self.publish_status()
+
+    def status(self) -> StatusMessage:
+        values: dict[str, Any] = {}
+        for child in self.children:
+            values[f"state.{child.name}"] = child.state
+            values[f"pid.{child.name}"] = child.pid or 0
+            values[f"restarts.{child.name}"] = child.restarts
+        return StatusMessage(
+            node="site",
+            role="site",
+            state="stopping" if self._stop.is_set() else "running",
+            stamp=time.time(),
+            values=values,
+            counters=self.hub.stats.snapshot() if self.hub is not None else {},
+        )
+
+    def publish_status(self) -> None:
+        if self.hub is not None and not self.hub.closed:
+            self.hub.publish(self.hub.keys.status("site"), self.status())
+
+    def summary(self) -> str:
+        """One line: each node's rate, latency and drops; tracks; outputs."""
+        with self._lock:
+            statuses = dict(self.statuses)
+        parts = []
+        detectors = [c for c in self.children if c.role == "detector"]
+        for child in detectors:
+            s = statuses.get(child.name)
+            if child.state != "running" or s is None:
+                parts.append(
+                    f"{child.name} {child.state if child.state != 'running' else 'starting'}"
+                )
+            else:
+                parts.append(
+                    f"{child.name} {s.fps:.1f} fps {s.latency_ms:.0f} ms dropped {s.dropped}"
+                )
+        tracker = statuses.get("tracker")
+        if tracker is not None:
+            parts.append(
+                f"tracker {tracker.fps:.0f} Hz {tracker.latency_ms:.0f} ms, "
+                f"{tracker.values.get('tracks', 0)} tracks"
+            )
+        outputs = statuses.get("outputs")
+        if outputs is not None:
+            for d in outputs.destinations:
+                errors = f", {d.errors} errors" if d.errors else ""
+                parts.append(f"{d.kind} {d.address} sent {d.sent}{errors}")
+        return "; ".join(parts)
+
+    # ------------------------------------------------------------------ stop
+    def request_stop(self) -> None:
+        self._stop.set()
+
+    def stop(self) -> None:
+        """Stop the children in order (detectors, tracker, outputs), then the hub."""
+        self._stop.set()
+        timeout = float(self.params.stop_timeout_s)
+        for roles in (("gui", "detector"), ("tracker",), ("outputs",)):
+            group = [
+                c
+                for c in self.children
+                if c.role in roles and c.process is not None and c.process.poll() is None
+            ]
+            for child in group:
+                try:
+                    child.process.send_signal(signal.SIGTERM)  # type: ignore[union-attr]
+                except ProcessLookupError:
+                    pass
+            deadline = time.monotonic() + timeout
+            for child in group:
+                assert child.process is not None
+                try:
+                    child.process.wait(max(0.0, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    log.warning("%s did not stop within %.1f s; killing it.", child.label, timeout)
+                    child.process.kill()
+                    child.process.wait()
+                child.state = "stopped"
+        for child in self.children:
+            if child.state == "waiting":
+                child.state = "stopped"
+        if self.hub is not None:
+            try:
+                self.publish_status()
+            finally:
+                self.hub.close()
+        if self._run_dir is not None:
+            shutil.rmtree(self._run_dir, ignore_errors=True)
+            self._run_dir = None
+
+    def run(self) -> int:
+        """Start, supervise until Ctrl-C, ``--seconds`` or the window closing, stop."""
+        previous = {
+            sig: signal.signal(sig, lambda number, frame: self.request_stop())
+            for sig in (signal.SIGINT, signal.SIGTERM)
+        }
+        started = time.monotonic()
+        try:
+            self.start()
+            deadline = started + self.seconds if self.seconds is not None else None
+            report_s = float(self.params.report_s)
+            next_report = time.monotonic() + report_s
+            next_status = time.monotonic()
+            while not self._stop.is_set():
+                now = time.monotonic()
+                if deadline is not None and now >= deadline:
+                    break
+                self.supervise_once(now)
+                if now >= next_status:
+                    self.publish_status()
+                    next_status = now + 1.0
+                if report_s > 0 and now >= next_report:
+                    log.info("%s", self.summary())
+                    next_report = now + report_s
+                self._stop.wait(0.1)
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+            log.info("stopping the site after %.1f s.", time.monotonic() - started)
+            self.stop()
+        return 0

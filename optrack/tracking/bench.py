@@ -1,0 +1,295 @@
+"""``optrack bench tracking``: speed of the tracker, and accuracy against norfair.
+
+* ``ms_per_update_20x10``: median time of one :meth:`Tracker.update` with 20
+  people walking in a room watched by 10 sensors (every sensor's batches at
+  30 Hz, so 300 updates a second), synthetic detections, default settings.
+* Peer comparison: our tracker and norfair's Kalman point tracker on the same
+  detection streams, scored with the same CLEAR MOT (0.5 m). Streams are
+  synthetic scenes with known answers and, when the simulator is built, the
+  detector's output on short simulated recordings of the ``crowd``,
+  ``distance`` and ``occlusions`` scenarios (made once and cached, see
+  :func:`bench_cache`). norfair is tuned fairly: a grid of its distance
+  threshold, hit counter and initialisation delay is searched on a different
+  seed of each scene, and the best setting is then scored.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import itertools
+import os
+import statistics
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import numpy as np
+
+from optrack.evaluation.clear_mot import ClearMot, MotScore
+from optrack.evaluation.replay import replay
+from optrack.evaluation.synthetic import SceneTruth, crowd_scene, render
+from optrack.tracking.params import TRACKING_PARAMS
+from optrack.tracking.tracker import Tracker
+from optrack.types import DetectionBatch
+
+__all__ = ["BenchStream", "bench_cache", "cmd_bench_tracking", "run_norfair", "run_ours"]
+
+#: norfair settings searched (distance m, hit counter and delay in seconds of updates)
+NORFAIR_DISTANCES = (0.4, 0.7, 1.0)
+NORFAIR_MEMORY_S = (0.3, 1.0)
+NORFAIR_DELAY_S = (0.0, 0.1)
+
+
+@dataclasses.dataclass
+class BenchStream:
+    """One detection stream with its ground truth (ids, positions, counted) per instant."""
+
+    name: str
+    source: str
+    sensors: int
+    batches: list[DetectionBatch]
+    times: np.ndarray
+    ids: list[np.ndarray]
+    xy: list[np.ndarray]
+    counted: list[np.ndarray]
+
+    @property
+    def updates_per_second(self) -> float:
+        span = self.batches[-1].stamp - self.batches[0].stamp if len(self.batches) > 1 else 1.0
+        return len(self.batches) / max(span, 1e-9)
+
+
+def _info(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def _from_synthetic(name: str, batches: list[DetectionBatch], truth: SceneTruth, sensors: int) -> BenchStream:
+    return BenchStream(name, "synthetic", sensors, batches, truth.times, truth.ids, truth.xy, truth.visible)
+
+
+def _score(stream: BenchStream, outputs: Sequence[Sequence[tuple[int, float, float]]]) -> MotScore:
+    mot = ClearMot()
+    for k, tracks in enumerate(outputs):
+        mot.add(
+            stream.ids[k],
+            stream.xy[k],
+            stream.counted[k],
+            np.array([t[0] for t in tracks], dtype=np.int64),
+            np.array([(t[1], t[2]) for t in tracks], dtype=np.float64).reshape(-1, 2),
+        )
+    return mot.score()
+
+
+def run_ours(stream: BenchStream, settings: dict[str, Any] | None = None) -> tuple[MotScore, float]:
+    """Our tracker (default settings) through the output smoother; score and median ms."""
+    tracker = Tracker(TRACKING_PARAMS.create(settings or {}), sensors=stream.sensors)
+    result = replay(stream.batches, stream.times, tracker)
+    outputs = [[(t.id, t.x, t.y) for t in out.tracks] for out in result.outputs]
+    return _score(stream, outputs), result.ms_per_update
+
+
+def run_norfair(
+    stream: BenchStream, distance: float, memory_s: float, delay_s: float, min_confidence: float
+) -> tuple[MotScore, float]:
+    """norfair's Tracker (Euclidean distance on floor points, its default Kalman filter), one
+    update per detection batch; its active objects are sampled at each instant."""
+    import norfair
+
+    rate = stream.updates_per_second
+    tracker = norfair.Tracker(
+        distance_function="euclidean",
+        distance_threshold=distance,
+        hit_counter_max=max(1, round(memory_s * rate)),
+        initialization_delay=round(delay_s * rate),
+        detection_threshold=min_confidence,
+        past_detections_length=0,
+    )
+    outputs: list[list[tuple[int, float, float]]] = []
+    current: list[tuple[int, float, float]] = []
+    times = stream.times
+    k = 0
+    update_ms = []
+    for batch in stream.batches:
+        while k < len(times) and times[k] < batch.stamp:
+            outputs.append(current)
+            k += 1
+        detections = [
+            norfair.Detection(points=np.array([[d.x, d.y]]), scores=np.array([d.confidence]))
+            for d in batch.detections
+        ]
+        started = time.perf_counter()
+        active = tracker.update(detections=detections)
+        update_ms.append((time.perf_counter() - started) * 1000.0)
+        current = [(o.id, float(o.estimate[0, 0]), float(o.estimate[0, 1])) for o in active]
+    outputs.extend([current] * (len(times) - k))
+    return _score(stream, outputs), statistics.median(update_ms)
+
+
+def _tune_norfair(tuning: BenchStream, min_confidence: float) -> dict[str, float]:
+    best: tuple[float, int, dict[str, float]] | None = None
+    for distance, memory, delay in itertools.product(
+        NORFAIR_DISTANCES, NORFAIR_MEMORY_S, NORFAIR_DELAY_S
+    ):
+        setting = {"distance": distance, "memory_s": memory, "delay_s": delay}
+        score, _ = run_norfair(tuning, min_confidence=min_confidence, **setting)
+        key = (score.mota, -score.idsw)
+        if best is None or key > (best[0], best[1]):
+            best = (score.mota, -score.idsw, setting)
+    assert best is not None
+    return best[2]
+
+
+def bench_cache() -> Path:
+    """Where simulated bench recordings and their detections are kept between runs
+    ($OPTRACK_CACHE, else $XDG_CACHE_HOME/optrack, else ~/.cache/optrack)."""
+    root = os.environ.get("OPTRACK_CACHE")
+    if root:
+        return Path(root) / "bench"
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "optrack" / "bench"
+
+
+#: simulated scenes of the comparison: (scenario, sensors, seconds)
+SIM_SCENES = (("crowd", 3, 20.0), ("distance", 1, 20.0), ("occlusions", 1, 20.0))
+
+
+def _sim_stream(scenario: str, sensors: int, seconds: float, seed: int) -> BenchStream | None:
+    """Detections of a short simulated recording, made once and cached; None without the
+    simulator or detector."""
+    try:
+        from optrack.evaluation.run import Truth, detect_recording
+        from optrack.recording import Recording
+        from optrack.sim.recorder import write_recording
+        from optrack.sim.world import Simulation
+    except ImportError:
+        return None
+    from optrack import __version__
+
+    key = f"{scenario}-{sensors}s-{seconds:g}-seed{seed}-v{__version__}"
+    folder = bench_cache() / key
+    batches_file = folder / "batches.msgpack"
+    recording_dir = folder / "recording"
+    if not batches_file.is_file():
+        folder.mkdir(parents=True, exist_ok=True)
+        if not (recording_dir / "manifest.yaml").is_file():
+            _info(f"bench tracking: simulating {scenario} ({seconds:g} s, {sensors} sensors) once")
+            sim = Simulation(scenario, seed=seed, sensors=sensors, seconds=seconds)
+            write_recording(sim, recording_dir)
+        recording = Recording(recording_dir)
+        poses = {s: np.asarray(i.world_T_camera) for s, i in recording.sensors.items()}
+        _info(f"bench tracking: detecting people in {key} once")
+        batches = list(detect_recording(recording, poses))
+        batches_file.write_bytes(msgspec.msgpack.encode(batches))
+    recording = Recording(recording_dir)
+    batches = msgspec.msgpack.decode(batches_file.read_bytes(), type=list[DetectionBatch])
+    truth = Truth.from_instants(list(recording.ground_truth()), recording.sensor_ids)
+    counted = [truth.counted(k, recording.sensor_ids, 0.2) for k in range(len(truth.times))]
+    return BenchStream(
+        f"sim-{scenario}", "sim", sensors, batches, truth.times, truth.ids, truth.xy, counted
+    )
+
+
+def _synthetic_streams(seed: int) -> list[BenchStream]:
+    out = []
+    for name, people, sensors in (("synthetic-crowd", 7, 3), ("synthetic-one-sensor", 7, 1),
+                                  ("synthetic-dense", 15, 4)):
+        scene = crowd_scene(people, sensors, 60.0, seed=seed)
+        batches, truth = render(scene, seed=seed)
+        out.append(_from_synthetic(name, batches, truth, sensors))
+    return out
+
+
+def speed_20x10(seconds: float = 20.0, seed: int = 0) -> dict[str, float]:
+    """Median and 90th percentile of one update, 20 people seen by 10 sensors."""
+    scene = crowd_scene(20, 10, seconds, seed=seed)
+    batches, truth = render(scene, seed=seed)
+    tracker = Tracker(sensors=10)
+    times = []
+    for batch in batches:
+        started = time.perf_counter()
+        tracker.update(batch)
+        times.append((time.perf_counter() - started) * 1000.0)
+    return {
+        "ms_per_update_20x10": round(statistics.median(times), 4),
+        "ms_per_update_20x10_p90": round(float(np.percentile(times, 90)), 4),
+        "updates_20x10": len(times),
+        "detections_per_update_20x10": round(
+            float(np.mean([len(b.detections) for b in batches])), 2
+        ),
+    }
+
+
+def _compare(
+    streams: Sequence[tuple[BenchStream, BenchStream]], min_confidence: float, norfair_ok: bool
+) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for stream, tuning in streams:
+        ours, ours_ms = run_ours(stream)
+        entry: dict[str, Any] = {
+            "source": stream.source,
+            "sensors": stream.sensors,
+            "frames": ours.frames,
+            "ours": {
+                "mota": round(ours.mota, 4),
+                "idsw": ours.idsw,
+                "fp": ours.fp,
+                "fn": ours.fn,
+                "ms_per_update": round(ours_ms, 4),
+            },
+        }
+        if norfair_ok:
+            setting = _tune_norfair(tuning, min_confidence)
+            theirs, theirs_ms = run_norfair(stream, min_confidence=min_confidence, **setting)
+            entry["norfair"] = {
+                "mota": round(theirs.mota, 4),
+                "idsw": theirs.idsw,
+                "fp": theirs.fp,
+                "fn": theirs.fn,
+                "ms_per_update": round(theirs_ms, 4),
+                "settings": setting,
+            }
+            entry["better_than_norfair"] = ours.mota > theirs.mota and ours.idsw < theirs.idsw
+        out[stream.name] = entry
+        _info(f"bench tracking: {stream.name}: ours MOTA {ours.mota:.3f} / {ours.idsw} switches"
+              + (f"; norfair MOTA {theirs.mota:.3f} / {theirs.idsw}" if norfair_ok else ""))
+    return out
+
+
+def cmd_bench_tracking(args: argparse.Namespace) -> int:
+    """The ``optrack bench tracking`` command."""
+    result: dict[str, Any] = {}
+    result.update(speed_20x10())
+    try:
+        import norfair
+
+        result["norfair_version"] = norfair.__version__
+        norfair_ok = True
+    except ImportError:
+        result["norfair_version"] = None
+        result["norfair_missing"] = "norfair is not installed: pip install norfair (no deps)"
+        norfair_ok = False
+    min_confidence = float(TRACKING_PARAMS.create().min_confidence_initialization)
+    pairs = list(zip(_synthetic_streams(seed=1), _synthetic_streams(seed=2), strict=True))
+    for scenario, sensors, seconds in SIM_SCENES:
+        stream = _sim_stream(scenario, sensors, seconds, seed=1)
+        tuning = _sim_stream(scenario, sensors, seconds, seed=2) if stream is not None else None
+        if stream is not None and tuning is not None:
+            pairs.append((stream, tuning))
+    result["scenarios"] = _compare(pairs, min_confidence, norfair_ok)
+    if norfair_ok:
+        result["better_than_norfair_everywhere"] = all(
+            e["better_than_norfair"] for e in result["scenarios"].values()
+        )
+    if getattr(args, "json", False):
+        from optrack.cli import emit_json
+
+        emit_json(result)
+    else:
+        _info(f"median update with 20 people and 10 sensors: {result['ms_per_update_20x10']} ms")
+    return 0
+
+

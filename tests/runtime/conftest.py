@@ -1,0 +1,103 @@
+"""Runtime fixtures: a small simulated venue recording, buses on free loopback ports,
+and child processes that are always cleaned up."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from optrack.net.bus import Bus
+from optrack.net.config import BUS_PARAMS
+
+VENUE_SECONDS = 1.5
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="session")
+def venue(tmp_path_factory) -> Path:
+    """1.5 s of the 'mixed' venue: three simulated Kinect v2 and walking people."""
+    from optrack.sim.recorder import write_recording
+    from optrack.sim.world import Simulation
+
+    path = tmp_path_factory.mktemp("venue") / "mixed"
+    write_recording(Simulation("mixed", seed=0, seconds=VENUE_SECONDS), path)
+    return path
+
+
+@pytest.fixture
+def bus_params():
+    return BUS_PARAMS.create({"local_port": free_port(), "connect_timeout_s": 10.0})
+
+
+@pytest.fixture
+def hub(bus_params) -> Iterator[Bus]:
+    bus = Bus("test", "hub", bus_params, host=True)
+    yield bus
+    bus.close()
+
+
+@pytest.fixture
+def make_client(hub, bus_params):
+    opened: list[Bus] = []
+
+    def make(node: str) -> Bus:
+        bus = Bus("test", node, bus_params)
+        opened.append(bus)
+        return bus
+
+    yield make
+    for bus in opened:
+        bus.close()
+
+
+class Processes:
+    """Child processes started by a test; each is stopped (then killed) at the end."""
+
+    def __init__(self) -> None:
+        self.started: list[subprocess.Popen[bytes]] = []
+
+    def start(self, args: list[str], **kwargs) -> subprocess.Popen[bytes]:
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", **kwargs.pop("env", {})}
+        process = subprocess.Popen(
+            [sys.executable, "-m", *args],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,
+            **kwargs,
+        )
+        self.started.append(process)
+        return process
+
+    def stop_all(self) -> None:
+        for process in self.started:
+            if process.poll() is None:
+                process.send_signal(signal.SIGTERM)
+        for process in self.started:
+            try:
+                process.wait(10)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+            # A launcher's own children are in their own sessions: kill any left.
+            if process.stdout is not None:
+                process.stdout.close()
+
+
+@pytest.fixture
+def processes() -> Iterator[Processes]:
+    p = Processes()
+    yield p
+    p.stop_all()

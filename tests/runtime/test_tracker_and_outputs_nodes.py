@@ -1,0 +1,182 @@
+"""The tracker and outputs nodes in-process on a real bus: detections in, OpenPTrack JSON
+out over UDP; refused batches; the calibration kept for late nodes; live outputs."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from optrack.net.messages import (
+    CalibrationMessage,
+    DetectionsMessage,
+    ParamsMessage,
+    StatusMessage,
+)
+from optrack.outputs import OUTPUTS_PARAMS
+from optrack.runtime.calibration_store import CalibrationStore
+from optrack.runtime.config import NODE_PARAMS
+from optrack.runtime.detector_node import CalibrationRequest
+from optrack.runtime.outputs_node import OutputsNode
+from optrack.runtime.tracker_node import TrackerNode
+from optrack.types import Detection, DetectionBatch, NetworkCalibration, SensorCalibration
+
+
+@pytest.fixture
+def receiver() -> Iterator[socket.socket]:
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    yield sock
+    sock.close()
+
+
+def documents(sock: socket.socket, seconds: float) -> list[dict]:
+    found = []
+    deadline = time.monotonic() + seconds
+    while (left := deadline - time.monotonic()) > 0:
+        sock.settimeout(left)
+        try:
+            found.append(json.loads(sock.recv(65536)))
+        except TimeoutError:
+            break
+    return found
+
+
+@pytest.fixture
+def site(hub, tmp_path, receiver):
+    """A running tracker node and outputs node sharing the hub's bus (as 'optrack node track')."""
+    address = f"127.0.0.1:{receiver.getsockname()[1]}"
+    tracker = TrackerNode(
+        hub, NODE_PARAMS.create({"status_period_s": 0.2}), CalibrationStore(tmp_path / "tracker")
+    )
+    outputs = OutputsNode(hub, NODE_PARAMS.create(), OUTPUTS_PARAMS.create({"udp": address}))
+    thread = threading.Thread(target=tracker.run, daemon=True)
+    thread.start()
+    yield tracker, outputs
+    tracker.stop()
+    thread.join(5)
+    outputs.close()
+
+
+def person(x: float, y: float, sensor: str, t: float) -> DetectionsMessage:
+    return DetectionsMessage(
+        batch=DetectionBatch(sensor, t, detections=[Detection(x, y, 0.9, 1.75, 2.0)])
+    )
+
+
+def walk(node_bus, sensors: list[str], seconds: float, rate: float = 30.0) -> None:
+    """One person walking along x, seen by every sensor, in real time."""
+    start = time.time()
+    k = 0
+    while (t := time.time()) - start < seconds:
+        sensor = sensors[k % len(sensors)]
+        node_bus.publish(
+            node_bus.keys.detections(sensor), person(1.0 * (t - start), 0.5, sensor, t)
+        )
+        k += 1
+        time.sleep(1.0 / rate)
+
+
+def test_detections_in_openptrack_json_out(site, make_client, receiver):
+    camera = make_client("cams")
+    time.sleep(0.2)
+    walk(camera, ["cam0", "cam1"], 1.5)
+    found = documents(receiver, 0.5)
+    frames = [d for d in found if d["header"]["frame_id"] == "world" and d["tracks"]]
+    beats = [d for d in found if d["header"]["frame_id"] == "heartbeat"]
+    assert frames, "no tracks came out"
+    track = frames[-1]["tracks"][0]
+    assert set(track) == {"id", "x", "y", "height", "age", "confidence"}
+    assert track["y"] == pytest.approx(0.5, abs=0.1)
+    assert track["height"] == pytest.approx(1.75, abs=0.05)
+    assert beats and beats[-1]["alive_IDs"] == [track["id"]]
+    stamp = frames[-1]["header"]["stamp"]
+    assert time.time() - (stamp["sec"] + stamp["nsec"] * 1e-9) < 1.0
+
+
+def test_a_batch_on_another_sensors_key_is_refused(site, make_client):
+    tracker, _ = site
+    camera = make_client("cams")
+    time.sleep(0.2)
+    camera.publish(camera.keys.detections("cam0"), person(0, 0, "cam1", time.time()))
+    deadline = time.monotonic() + 3
+    while tracker.refused == 0 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert tracker.refused == 1
+    assert "each sensor publishes on its own key" in tracker.last_error
+
+
+def test_uncalibrated_detections_are_refused_with_the_trackers_sentence(site, make_client):
+    tracker, _ = site
+    camera = make_client("cams")
+    time.sleep(0.2)
+    message = person(0, 0, "cam0", time.time())
+    message.batch.frame_id = "ground"
+    camera.publish(camera.keys.detections("cam0"), message)
+    deadline = time.monotonic() + 3
+    while tracker.refused == 0 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert "give the detector the calibration" in tracker.last_error
+
+
+def test_the_tracker_keeps_the_calibration_for_nodes_that_start_later(site, make_client):
+    tracker, _ = site
+    gui = make_client("gui")
+    time.sleep(0.2)
+    pose = tuple(tuple(float(v) for v in row) for row in np.eye(4))
+    gui.publish(
+        gui.keys.calibration,
+        CalibrationMessage(
+            calibration=NetworkCalibration(
+                sensors={"cam0": SensorCalibration(world_T_camera=pose)}, notes="cal-1"
+            )
+        ),
+        realtime=False,
+    )
+    deadline = time.monotonic() + 3
+    while tracker.calibration is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    late = make_client("cam0")
+    time.sleep(0.2)
+    (reply,) = late.query(late.keys.calibration, CalibrationRequest(), CalibrationMessage, 2.0)
+    assert reply.calibration.notes == "cal-1"
+    assert tracker.store.path.exists()
+
+
+def test_outputs_change_destination_while_running(site, make_client, receiver):
+    _, outputs = site
+    other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    other.bind(("127.0.0.1", 0))
+    try:
+        gui = make_client("gui")
+        statuses = []
+        gui.subscribe(gui.keys.status("outputs"), StatusMessage, lambda m, k: statuses.append(m))
+        time.sleep(0.2)
+        gui.publish(
+            gui.keys.params("outputs"),
+            ParamsMessage(updates={"outputs": {"udp": f"127.0.0.1:{other.getsockname()[1]}"}}),
+            realtime=False,
+        )
+        assert documents(other, 1.0), "the new destination received nothing"
+        gui.publish(
+            gui.keys.params("outputs"),
+            ParamsMessage(updates={"outputs": {"udp_mode": "multicast"}}),
+            realtime=False,
+        )
+        deadline = time.monotonic() + 3
+        while "not a multicast group" not in outputs.last_error and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert "not a multicast group" in outputs.last_error
+        assert outputs.live["outputs"].udp_mode == "unicast"
+        outputs.publish_status()
+        deadline = time.monotonic() + 3
+        while not statuses and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert [d.kind for d in statuses[-1].destinations] == ["udp"]
+    finally:
+        other.close()
