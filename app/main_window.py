@@ -12,8 +12,8 @@ import logging
 from typing import Any
 
 import numpy as np
-from PySide6.QtCore import Qt
-from PySide6.QtGui import QAction, QKeySequence
+from PySide6.QtCore import QPoint, Qt
+from PySide6.QtGui import QAction, QImage, QKeySequence, QPainter
 from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow, QWidget
 
 from app.embedded_site import EmbeddedSite
@@ -117,6 +117,7 @@ class MainWindow(QMainWindow):
         self._connections: list[tuple[Any, Any]] = []
         self._site_clouds: set[str] = set()
         self._stage_reporter: dict[str, str] = {}
+        self._max_depth: dict[str, float] = {}  # each sensor's detection.max_distance, m
         self.embedded_site: EmbeddedSite | None = None
         self._site_stop_timeout_s = 0.0
         self._waiting_text = ""
@@ -160,6 +161,7 @@ class MainWindow(QMainWindow):
         self.source = source
         self._site_clouds.clear()
         self._stage_reporter.clear()
+        self._max_depth.clear()
         self._connections = [
             (source.tracks, self.show_tracks),
             (source.calibration, self.show_calibration),
@@ -173,8 +175,6 @@ class MainWindow(QMainWindow):
         for signal, slot in self._connections:
             signal.connect(slot)
         self.show_connection(source.describe() if source.connected else "")
-        if type(source) is SiteSource:
-            self.log_panel.append("info", f"{NO_SITE}.")
 
     def run_embedded_site(self, site: EmbeddedSite, stop_timeout_s: float) -> None:
         """Own the embedded site: show what it says, stop it when the window closes."""
@@ -223,12 +223,10 @@ class MainWindow(QMainWindow):
     def _draw_calibration(self) -> None:
         if self.calibration is None:
             return
-        detection = self.parameters.values.get("detection")
-        max_depth = (
-            float(detection.max_distance)
-            if detection is not None
-            else self.view_params.coverage_depth
-        )
+        max_depth = {
+            sensor: self._max_depth.get(sensor, self.view_params.coverage_depth)
+            for sensor in self.calibration.sensors
+        }
         self.top_view.set_calibration(self.calibration, max_depth)
         self.world.set_calibration(self.calibration, self.view_params.frustum_depth)
 
@@ -257,6 +255,12 @@ class MainWindow(QMainWindow):
     def show_status(self, node: str, values: dict) -> None:
         self.sensors.set_status(node, values)
         self.outputs.set_status(node, values)
+        detection = (values.get("params") or {}).get("detection") or {}
+        if values.get("role") == "detector" and "max_distance" in detection:
+            depth = float(detection["max_distance"])
+            if self._max_depth.get(node) != depth:
+                self._max_depth[node] = depth  # a detector node is named after its sensor
+                self._draw_calibration()
         # Several nodes may run a stage (one detector per sensor): the panel follows the
         # first that reported it, so that it does not flip between their values.
         for stage, stage_values in (values.get("params") or {}).items():
@@ -286,8 +290,6 @@ class MainWindow(QMainWindow):
             self._apply_view(values)
         else:
             self.source.set_params(stage, values)
-            if stage == "detection" and "max_distance" in values:
-                self._draw_calibration()
 
     def _apply_view(self, values: dict[str, Any]) -> None:
         self.view_params.update(values)
@@ -299,6 +301,23 @@ class MainWindow(QMainWindow):
         self.log_panel.max_lines = view.log_lines
         if {"frustum_depth", "coverage_depth"} & set(values):
             self._draw_calibration()
+
+    def screenshot(self) -> QImage:
+        """The window as the operator sees it. ``QWidget.grab`` renders the 3D view
+        without what pyqtgraph paints over it with QPainter (camera names, track ids),
+        so the view's own framebuffer is laid over it, then the view's message."""
+        image = self.grab().toImage()
+        if self.world.isVisible():
+            painter = QPainter(image)
+            ratio = image.devicePixelRatio()
+            origin = self.world.mapTo(self, QPoint(0, 0))
+            frame = self.world.grabFramebuffer()
+            frame.setDevicePixelRatio(ratio)
+            painter.drawImage(origin, frame)
+            if self.world.overlay.isVisible():
+                painter.drawPixmap(origin + self.world.overlay.pos(), self.world.overlay.grab())
+            painter.end()
+        return image
 
     def shut_down(self) -> None:
         """Leave the bus and stop the embedded site; idempotent."""

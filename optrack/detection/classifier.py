@@ -91,7 +91,9 @@ def level_window(
     return np.asarray(K, dtype=np.float64) @ camera_R_virtual @ np.linalg.inv(K_virtual)
 
 
-def window_footprint(window_to_image: np.ndarray, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+def window_footprint(
+    window_to_image: np.ndarray, shape: tuple[int, int]
+) -> tuple[int, int, int, int]:
     """The image pixels (u0, v0, u1, v1), half-open and clipped, a window covers."""
     out_w, out_h = HOG_WINDOW
     corners = np.array([[0, 0, 1], [out_w - 1, 0, 1], [0, out_h - 1, 1], [out_w - 1, out_h - 1, 1]])

@@ -12,6 +12,7 @@ who is found is not a false positive).
 from __future__ import annotations
 
 import bisect
+import collections
 import dataclasses
 from collections.abc import Callable
 from pathlib import Path
@@ -43,6 +44,7 @@ class DetectionScore:
     detections: int = 0
     correct: int = 0  # detections matched to someone in view
     ms: list[float] = dataclasses.field(default_factory=list)
+    sources: collections.Counter[str] = dataclasses.field(default_factory=collections.Counter)
 
     @property
     def recall(self) -> float | None:
@@ -64,6 +66,7 @@ class DetectionScore:
             "people": self.required,
             "detections": self.detections,
             "ms": self.median_ms,
+            "confidence_sources": dict(self.sources),
         }
 
 
@@ -112,6 +115,8 @@ def evaluate_recording(
     if not truths:
         raise ValueError(f"recording {path} has no ground truth to score against.")
     times = [t.t for t in truths]
+    # A simulated sensor stamps frames on its own clock: true time + its offset.
+    offsets = recording.manifest.extra.get("clock_offsets") or {}
     detectors: dict[str, PeopleDetector] = {}
     score = DetectionScore()
     for count, frame in enumerate(recording.frames()):
@@ -128,10 +133,12 @@ def evaluate_recording(
             )
             detectors[frame.sensor_id] = detector
         batch = detector.process(frame)
-        i = bisect.bisect_left(times, frame.timestamp)
+        score.sources.update(j.source for j in detector.last_judgements)
+        true_t = frame.timestamp - float(offsets.get(frame.sensor_id, 0.0))  # type: ignore[union-attr]
+        i = bisect.bisect_left(times, true_t)
         nearest = min(
             (j for j in (i - 1, i) if 0 <= j < len(times)),
-            key=lambda j: abs(times[j] - frame.timestamp),
+            key=lambda j: abs(times[j] - true_t),
         )
         score_batch(batch, truths[nearest], score, min_visible, radius)
         if progress is not None:

@@ -256,7 +256,7 @@ DETECTION_PARAMS = register(
             ),
             Param(
                 "head_prominence",
-                0.1,
+                0.05,
                 min=0.0,
                 max=1.0,
                 step=0.01,

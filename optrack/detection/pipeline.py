@@ -27,7 +27,6 @@ import numpy as np
 
 from optrack.detection.background import BackgroundModel
 from optrack.detection.classifier import (
-    HOG_WINDOW,
     HogClassifier,
     equalised_infrared,
     hsv_histogram,

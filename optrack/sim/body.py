@@ -227,6 +227,9 @@ class BodyModel:
             materials.append(np.full(len(self._cyl_t), part.material))
             part_of_triangle.append(np.full(len(self._cyl_t), k + 1, dtype=np.int16))
         self.vertices_per_person = n_sph_v + len(CYLINDERS) * n_cyl_v
+        # Index of each part's first vertex in one person's vertices: the parts' vertices
+        # are contiguous blocks, the head first, then each limb.
+        self.part_starts = np.concatenate([[0], n_sph_v + n_cyl_v * np.arange(len(CYLINDERS))])
         self.template_triangles = np.concatenate(triangles).astype(np.uint32)
         self.template_material = np.concatenate(materials).astype(np.int32)
         self.template_part = np.concatenate(part_of_triangle)
@@ -352,13 +355,6 @@ class BodyModel:
                 world[person, J[f"hand_{side}"]] = wrist + fore * HAND * H * HAND_REACH
 
     # ------------------------------------------------------------------ mesh
-    @property
-    def part_starts(self) -> np.ndarray:
-        """Index of each body part's first vertex within one person's vertices (the parts'
-        vertices are contiguous: the head, then each limb)."""
-        heads, limb = len(self._sph_v), len(self._cyl_v)
-        return np.concatenate([[0], heads + limb * np.arange(len(CYLINDERS))])
-
     def vertices(self, joints: np.ndarray, pose: BodyPose) -> np.ndarray:
         """Mesh vertices of every body, (P, vertices_per_person, 3), world frame."""
         H = np.asarray(pose.height, dtype=np.float64)

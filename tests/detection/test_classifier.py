@@ -10,8 +10,8 @@ from optrack.detection.classifier import (
     HogClassifier,
     equalised_infrared,
     hsv_histogram,
-    luminance,
     level_window,
+    luminance,
     person_window,
     window_footprint,
 )

@@ -112,8 +112,8 @@ def test_dark_frame_is_judged_from_depth_alone_and_still_finds_five(five_people)
 def test_people_cut_by_the_image_border_are_flagged_out_of_view(five_people):
     detector = PeopleDetector(detection_params("pcl"), ground=PCL_GROUND)
     batch = detector.process_cloud(five_people.points, KINECT1, five_people.colors)
-    by_x = sorted(batch.detections, key=lambda d: d.camera_xyz[0])
-    assert by_x[0].out_of_view  # the man on the left edge, his feet below the frame
+    nearest = min(batch.detections, key=lambda d: d.camera_xyz[2])
+    assert nearest.out_of_view  # the man on the right, 1.9 m away: his feet below the frame
     centre = min(batch.detections, key=lambda d: abs(d.camera_xyz[0] - 0.128))
     assert not centre.out_of_view
     for d in batch.detections:
