@@ -76,19 +76,20 @@ def level_window(
         horizontal = np.array([0.0, 0.0, 1.0]) - down[2] * down
         distance = float(np.linalg.norm(horizontal))
     z = horizontal / distance
-    x = np.cross(down, z)
-    camera_R_virtual = np.stack([x, down, z], axis=1)
+    x = np.array(
+        [
+            down[1] * z[2] - down[2] * z[1],
+            down[2] * z[0] - down[0] * z[2],
+            down[0] * z[1] - down[1] * z[0],
+        ]
+    )  # down x z
+    camera_R_virtual = np.column_stack([x, down, z])
     out_w, out_h = HOG_WINDOW
     f = fill * out_h * distance / max(height, 1e-6)
     below = float(center @ down)  # how far the centre is below the optical centre
-    K_virtual = np.array(
-        [
-            [f, 0.0, (out_w - 1) / 2.0],
-            [0.0, f, (out_h - 1) / 2.0 - f * below / distance],
-            [0.0, 0.0, 1.0],
-        ]
-    )
-    return np.asarray(K, dtype=np.float64) @ camera_R_virtual @ np.linalg.inv(K_virtual)
+    cx, cy = (out_w - 1) / 2.0, (out_h - 1) / 2.0 - f * below / distance
+    K_virtual_inverse = np.array([[1.0 / f, 0.0, -cx / f], [0.0, 1.0 / f, -cy / f], [0.0, 0.0, 1.0]])
+    return np.asarray(K, dtype=np.float64) @ camera_R_virtual @ K_virtual_inverse
 
 
 def window_footprint(

@@ -101,10 +101,13 @@ def euclidean_clusters(
         (np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n)
     )
     _, labels = connected_components(graph, directed=False)
-    order = np.argsort(labels, kind="stable")
     counts = np.bincount(labels)
-    groups = np.split(order, np.cumsum(counts)[:-1])
-    return [g for g, c in zip(groups, counts, strict=True) if min_points <= c <= max_points]
+    kept = np.flatnonzero((counts >= min_points) & (counts <= max_points))
+    if len(kept) == 0:
+        return []
+    order = np.argsort(labels, kind="stable")
+    starts = np.cumsum(counts) - counts
+    return [order[starts[k] : starts[k] + counts[k]] for k in kept]
 
 
 def _merge_close(

@@ -451,11 +451,13 @@ DETECTION_PARAMS = register(
 #: OpenPTrack's configuration per sensor model (and PCL's unit-test settings).
 SENSOR_MODELS: dict[str, dict[str, Any]] = {
     "default": {},
-    "kinect1": {"max_distance": 5.0, "sampling_factor": 4},
+    # OpenPTrack's Kinect and stereo detectors run HOG on colour only: in the dark,
+    # they judge from depth (the luminance gate), not from the Kinect's infrared.
+    "kinect1": {"max_distance": 5.0, "sampling_factor": 4, "hog_image": "color"},
     # OpenPTrack subsamples Kinect v2's 960x540 registered cloud by 4; on the native
     # 512x424 depth image, 2 keeps about as many points (256x212 against 240x135).
-    "kinect2": {"max_distance": 10.0, "sampling_factor": 2},
-    "stereo": {"max_distance": 15.0, "sampling_factor": 4},
+    "kinect2": {"max_distance": 10.0, "sampling_factor": 2, "hog_image": "color"},
+    "stereo": {"max_distance": 15.0, "sampling_factor": 4, "hog_image": "color"},
     "sr4500": {
         "max_distance": 10.0,
         "sampling_factor": 1,

@@ -303,14 +303,16 @@ class PeopleDetector:
         )
         histogram: list[float] = []
         if color is not None and np.any(mask):
-            uv, _ = project(crop_c[mask], color_intrinsics)
-            u = np.rint(uv[:, 0]).astype(np.int64)
-            v = np.rint(uv[:, 1]).astype(np.int64)
-            inside = (u >= 0) & (u < color.shape[1]) & (v >= 0) & (v < color.shape[0])
+            if color_intrinsics is cloud.intrinsics:  # registered: the same pixels
+                person_colors = color[v0:v1:stride, u0:u1:stride][mask]
+            else:
+                uv, _ = project(crop_c[mask], color_intrinsics)
+                u = np.rint(uv[:, 0]).astype(np.int64)
+                v = np.rint(uv[:, 1]).astype(np.int64)
+                inside = (u >= 0) & (u < color.shape[1]) & (v >= 0) & (v < color.shape[0])
+                person_colors = color[v[inside], u[inside]]
             histogram = hsv_histogram(
-                color[v[inside], u[inside]],
-                int(p.histogram_hue_bins),
-                int(p.histogram_saturation_bins),
+                person_colors, int(p.histogram_hue_bins), int(p.histogram_saturation_bins)
             )
         box_h = person_px * float(p.box_enlarge_factor)
         box_w = box_h / 2.0

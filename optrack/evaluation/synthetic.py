@@ -91,9 +91,9 @@ class Scene:
     miss_probability: float = 0.05
     occluded_miss_probability: float = 0.5
     false_alarms_per_frame: float = 0.05
-    confidence_mean: float = 1.0
-    confidence_std: float = 0.6
-    false_alarm_confidence_mean: float = -0.8
+    confidence_mean: float = 0.4  # like the detector's HOG margins on simulated people
+    confidence_std: float = 1.1
+    false_alarm_confidence_mean: float = -1.2
     histogram_noise: float = 0.15
     truth_rate: float = 30.0
 
@@ -227,7 +227,7 @@ def render(
                         y=sensor.y + d * math.sin(a),
                         z=0.8,
                         height=float(rng.uniform(1.3, 2.0)),
-                        confidence=float(rng.normal(scene.false_alarm_confidence_mean, 0.4)),
+                        confidence=float(rng.normal(scene.false_alarm_confidence_mean, 0.5)),
                         camera_xyz=(0.0, 0.0, d),
                         histogram=list(_random_histogram(rng)),
                     )

@@ -227,9 +227,14 @@ class BodyModel:
             materials.append(np.full(len(self._cyl_t), part.material))
             part_of_triangle.append(np.full(len(self._cyl_t), k + 1, dtype=np.int16))
         self.vertices_per_person = n_sph_v + len(CYLINDERS) * n_cyl_v
-        # Index of each part's first vertex in one person's vertices: the parts' vertices
-        # are contiguous blocks, the head first, then each limb.
-        self.part_starts = np.concatenate([[0], n_sph_v + n_cyl_v * np.arange(len(CYLINDERS))])
+        # Each limb's cap vertices (ring and centre) at its base and its top, paired.
+        base = np.flatnonzero(np.isclose(self._cyl_v[:, 2], 0.0))
+        top = np.flatnonzero(np.isclose(self._cyl_v[:, 2], 1.0))
+        pair = np.argmin(
+            np.linalg.norm(self._cyl_v[base][:, None, :2] - self._cyl_v[top][None, :, :2], axis=2),
+            axis=1,
+        )
+        self._cap_base, self._cap_top = base, top[pair]
         self.template_triangles = np.concatenate(triangles).astype(np.uint32)
         self.template_material = np.concatenate(materials).astype(np.int32)
         self.template_part = np.concatenate(part_of_triangle)
@@ -355,6 +360,20 @@ class BodyModel:
                 world[person, J[f"hand_{side}"]] = wrist + fore * HAND * H * HAND_REACH
 
     # ------------------------------------------------------------------ mesh
+    def hulls(self, vertices: np.ndarray) -> list[np.ndarray]:
+        """Point groups whose convex hulls together cover every body: each head, and each
+        half of each limb (its cap rings and the ring halfway). Arrays (G, K, 3), one per
+        group size; a renderer casts only the rays that can meet these hulls."""
+        n = len(vertices)
+        heads = vertices[:, : len(self._sph_v)]
+        limbs = vertices[:, len(self._sph_v) :].reshape(n, len(CYLINDERS), len(self._cyl_v), 3)
+        base, top = limbs[:, :, self._cap_base], limbs[:, :, self._cap_top]
+        middle = (base + top) / 2
+        halves = np.concatenate(
+            [np.concatenate([base, middle], axis=2), np.concatenate([middle, top], axis=2)], axis=1
+        )
+        return [heads, halves.reshape(-1, halves.shape[2], 3)]
+
     def vertices(self, joints: np.ndarray, pose: BodyPose) -> np.ndarray:
         """Mesh vertices of every body, (P, vertices_per_person, 3), world frame."""
         H = np.asarray(pose.height, dtype=np.float64)

@@ -105,9 +105,9 @@ class DynamicGeometry:
     """Everything that moves at one instant, as one mesh.
 
     ``boxes[k]`` is the axis-aligned (min, max) box of owner k (a person, or
-    the board, last). The vertices come in contiguous blocks, one per rigid part
-    (a body part, the board), starting at ``part_starts``; the image rectangles
-    of the parts decide the rays a frame casts.
+    the board, last). ``hulls`` are groups of points (arrays (G, K, 3)) whose
+    convex hulls together cover the meshes: their image rectangles decide the
+    rays a frame casts.
     """
 
     vertices: np.ndarray
@@ -117,7 +117,7 @@ class DynamicGeometry:
     triangle_texture: np.ndarray
     materials: MaterialTable
     boxes: np.ndarray
-    part_starts: np.ndarray
+    hulls: list[np.ndarray]
     board: Checkerboard | None = None
     world_T_board: np.ndarray | None = None
     _scene: o3d.t.geometry.RaycastingScene | None = None
@@ -282,31 +282,48 @@ class SensorRenderer:
     # -------------------------------------------------------------- frames
     def pixels(self, dynamic: DynamicGeometry, widen: bool = False) -> np.ndarray:
         """Flat indices of the pixels whose rays can meet the moving meshes: the union of
-        the image rectangles bounding each part's projected vertices (parts are convex,
-        so a rectangle holds the whole projected part). ``widen`` adds the second view's
-        disparity sideways (pixels whose second-view ray can pass a part)."""
-        starts = dynamic.part_starts
-        if len(starts) == 0:
-            return np.zeros(0, dtype=np.int64)
+        the image rectangles bounding each hull's projected points (a convex hull projects
+        inside the rectangle of its projected points; pixel centres sit at integer
+        coordinates, and the rectangle is rounded outwards). ``widen`` adds the second view's
+        disparity sideways (pixels whose second-view ray can pass a hull)."""
         k, near = self.intrinsics, float(self.params.near_clip)
-        camera = dynamic.vertices @ self.camera_T_world[:3, :3].T.astype(np.float32)
-        camera += self.camera_T_world[:3, 3].astype(np.float32)
-        z = camera[:, 2]
-        z_min = np.minimum.reduceat(z, starts)
-        if np.any((z_min <= near) & (np.maximum.reduceat(z, starts) > near)):
-            return np.arange(self.width * self.height)  # a part straddles the camera plane
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = k.fx * camera[:, 0] / z + k.cx
-            v = k.fy * camera[:, 1] / z + k.cy
-        pad = np.zeros(len(starts))
-        if widen and self.second_view is not None:
-            pad = np.ceil(k.fx * abs(self.second_view) / np.maximum(z_min, near))
-        u0 = np.clip(np.floor(np.minimum.reduceat(u, starts)) - 1 - pad, 0, self.width).astype(int)
-        u1 = np.clip(np.ceil(np.maximum.reduceat(u, starts)) + 2 + pad, 0, self.width).astype(int)
-        v0 = np.clip(np.floor(np.minimum.reduceat(v, starts)) - 1, 0, self.height).astype(int)
-        v1 = np.clip(np.ceil(np.maximum.reduceat(v, starts)) + 2, 0, self.height).astype(int)
+        rotation = self.camera_T_world[:3, :3].T.astype(np.float32)
+        translation = self.camera_T_world[:3, 3].astype(np.float32)
+        rects = []
+        for group in dynamic.hulls:
+            if len(group) == 0:
+                continue
+            camera = group @ rotation + translation
+            z = camera[..., 2]
+            z_min = z.min(axis=1)
+            if np.any((z_min <= near) & (z.max(axis=1) > near)):
+                return np.arange(self.width * self.height)  # a hull straddles the camera plane
+            with np.errstate(divide="ignore", invalid="ignore"):
+                u = k.fx * camera[..., 0] / z + k.cx
+                v = k.fy * camera[..., 1] / z + k.cy
+            pad = 0.0
+            if widen and self.second_view is not None:
+                pad = np.ceil(k.fx * abs(self.second_view) / np.maximum(z_min, near))
+            rects.append(
+                np.stack(
+                    [
+                        np.floor(v.min(axis=1)),
+                        np.ceil(v.max(axis=1)) + 1,
+                        np.floor(u.min(axis=1)) - pad,
+                        np.ceil(u.max(axis=1)) + 1 + pad,
+                        z_min,
+                    ],
+                    axis=1,
+                )
+            )
+        if not rects:
+            return np.zeros(0, dtype=np.int64)
+        rects = np.concatenate(rects)
+        rects = rects[rects[:, 4] > near]
+        v0, v1 = (np.clip(rects[:, i], 0, self.height).astype(int) for i in (0, 1))
+        u0, u1 = (np.clip(rects[:, i], 0, self.width).astype(int) for i in (2, 3))
         mask = np.zeros(self.shape, dtype=bool)
-        for b in np.flatnonzero((z_min > near) & (u0 < u1) & (v0 < v1)):
+        for b in np.flatnonzero((u0 < u1) & (v0 < v1)):
             mask[v0[b] : v1[b], u0[b] : u1[b]] = True
         return np.flatnonzero(mask)
 

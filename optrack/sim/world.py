@@ -348,14 +348,13 @@ class Simulation:
         triangles, material, owner, texture, table = self._layout
         flat = vertices.reshape(-1, 3)
         boxes = list(np.stack([vertices.min(axis=1), vertices.max(axis=1)], axis=1))
-        per_person = body.vertices_per_person
-        starts = [(body.part_starts + k * per_person) for k in range(count)]
+        hulls = body.hulls(vertices) if count else []
         if with_board:
             board_vertices = transform_points(board_pose, self.board.vertices)
             flat = np.concatenate([flat, board_vertices])
             board_box = np.stack([board_vertices.min(axis=0), board_vertices.max(axis=0)])
             boxes.append(board_box)
-            starts.append(np.array([count * per_person]))
+            hulls.append(board_vertices[None])
         return DynamicGeometry(
             vertices=flat.astype(np.float32),
             triangles=triangles,
@@ -364,7 +363,7 @@ class Simulation:
             triangle_texture=texture,
             materials=table,
             boxes=np.array(boxes).reshape(-1, 2, 3),
-            part_starts=np.concatenate(starts) if starts else np.zeros(0, dtype=np.int64),
+            hulls=[h.astype(np.float32) for h in hulls],
             board=self.board if with_board else None,
             world_T_board=board_pose if with_board else None,
         )

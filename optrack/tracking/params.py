@@ -141,16 +141,17 @@ TRACKING_PARAMS = register(
                 min=-100.0,
                 max=100.0,
                 step=0.1,
-                help="Detections less confident than this are ignored by the tracker.",
+                help="Detections less confident than this are ignored by the tracker (the default "
+                "keeps all the detector sends).",
             ),
             Param(
                 "min_confidence_initialization",
-                -10.0,
+                -1.0,
                 min=-100.0,
                 max=100.0,
                 step=0.1,
                 help="A detection left over by association starts a track only with at least "
-                "this confidence.",
+                "this confidence (HOG margin; the detector sends from about -1.75).",
             ),
             Param(
                 "detections_to_validate",

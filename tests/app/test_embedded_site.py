@@ -63,15 +63,19 @@ def test_embedded_site_tracks_reach_the_table_and_top_view_within_15_s(qtbot, wi
     )
     elapsed = time.monotonic() - started
     print(f"first tracks in the table and the top view {elapsed:.1f} s after the window opened")
+    print("DEBUG stages", window.source._node_stages, window.sensors.table.rowCount())
     assert window.site_label.text() == "Embedded site 'guitest' on this computer"
     table_ids = {track.id for track in window.tracks_table.model.tracks}
     assert table_ids == set(window.top_view.track_positions())
 
 
 def test_moving_a_slider_changes_the_detectors_parameter(qtbot, window):
+    t0 = time.monotonic()
+    print(f"DEBUG test2 starts {t0 - window.opened_at:.1f} after open", window.source._node_stages)
     statuses = {}
     window.source.status.connect(lambda node, values: statuses.__setitem__(node, values))
     qtbot.waitUntil(lambda: bool(window.source.nodes_running("detection")), timeout=30000)
+    print(f"DEBUG nodes {time.monotonic() - t0:.1f}")
     voxel = window.parameters.editors["detection"]["voxel_size"]
     target = 0.08 if voxel.value() != 0.08 else 0.07
     voxel.slider.setValue(voxel.slider.value() + round((target - voxel.value()) / 0.01))
@@ -85,7 +89,11 @@ def test_moving_a_slider_changes_the_detectors_parameter(qtbot, window):
             for node in detectors
         )
 
+    print(f"DEBUG moved {time.monotonic() - t0:.1f}")
+    moved = time.monotonic()
     qtbot.waitUntil(applied, timeout=10000)
+    print(f"every detector reported the new voxel size {time.monotonic() - moved:.1f} s later")
+    print(f"DEBUG end {time.monotonic() - t0:.1f}")
 
 
 def test_an_output_added_in_the_panel_streams_tracks_to_it(qtbot, window):
@@ -111,7 +119,9 @@ def test_an_output_added_in_the_panel_streams_tracks_to_it(qtbot, window):
                 pass
             return bool(datagrams)
 
+        added = time.monotonic()
         qtbot.waitUntil(received, timeout=10000)
+        print(f"first datagram {time.monotonic() - added:.1f} s after the destination appeared")
         assert datagrams[0].startswith(b'{"header"')
     finally:
         receiver.close()

@@ -132,3 +132,22 @@ def test_joints_of_the_body_are_inside_its_rendered_silhouette(tmp_path):
 def test_scenario_lighting_is_read_from_the_file():
     scenario = load_scenario("mixed")
     assert scenario.venue.lighting.level == 1.0
+
+
+def test_casting_only_near_moving_parts_gives_the_same_depth_as_casting_everything():
+    import open3d as o3d
+
+    sim = Simulation("mixed", seed=3, people=6)
+    state = sim.snapshot(2.0)
+    renderer = sim.renderer(0)
+    fast = renderer.render(state.geometry)
+    full = o3d.t.geometry.RaycastingScene()
+    full.add_triangles(o3d.core.Tensor(sim.venue.vertices), o3d.core.Tensor(sim.venue.triangles))
+    full.add_triangles(
+        o3d.core.Tensor(state.geometry.vertices), o3d.core.Tensor(state.geometry.triangles)
+    )
+    depth = (
+        full.cast_rays(o3d.core.Tensor(renderer.rays))["t_hit"].numpy().reshape(fast.depth.shape)
+    )
+    assert (fast.labels >= 0).sum() > 1000
+    assert np.allclose(fast.depth, depth, rtol=0, atol=1e-5)

@@ -22,8 +22,8 @@ RED = person_histogram([0.0, 0.0], [0.9, 0.3], [0.6, 0.4])
 BLUE = person_histogram([0.6, 0.6], [0.8, 0.2], [0.6, 0.4])
 GREEN = person_histogram([0.33, 0.1], [0.8, 0.5], [0.6, 0.4])
 
-#: the tests' detections have HOG-like confidences around 1 (false alarms around -0.8)
-SETTINGS = {"min_confidence_initialization": 0.0}
+#: the tests use the default settings
+SETTINGS: dict[str, object] = {}
 
 
 def run(
