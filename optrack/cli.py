@@ -143,7 +143,7 @@ BENCHES: dict[str, str | None] = {
     "detection": "optrack.detection.bench:bench_detection",
     "tracking": None,
     "calibration": "optrack.calibration.bench:bench_calibration",
-    "e2e": None,
+    "e2e": "optrack.runtime.bench:bench_e2e",
 }
 
 

@@ -109,6 +109,8 @@ class PreviewView(QWidget):
             rect = QRectF(left + u * scale, top + v * scale, w * scale, h * scale)
             painter.setPen(pen)
             painter.drawRect(rect)
+            if metrics.horizontalAdvance(label) + 6 > rect.width():
+                label = label.split(":")[0]  # a narrow box: its index only
             tag = QRectF(
                 rect.left(), rect.top(), metrics.horizontalAdvance(label) + 6, metrics.height()
             )

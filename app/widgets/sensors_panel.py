@@ -39,9 +39,12 @@ def _format(value: Any, fmt: str) -> str:
     if value is None or value == "":
         return ""
     try:
-        return fmt.format(value)
+        text = fmt.format(value)
     except (ValueError, TypeError):
         return str(value)
+    if isinstance(value, float) and not text.strip("+-0."):
+        text = fmt.format(0.0)  # a tiny negative number shows as 0, not "-0.0"
+    return text
 
 
 class SensorsPanel(QWidget):

@@ -17,7 +17,8 @@ SENSOR_COLOR = (40, 110, 200)
 
 
 class TopView(pg.PlotWidget):
-    """World x (right) and y (up) in metres, equal scale; z = 0 is the floor."""
+    """World x (right) and y (up) in metres, equal scale; z = 0 is the floor. The view
+    frames the cameras; each camera's floor footprint runs to its detection range."""
 
     def __init__(self, trail_seconds: float = 8.0, parent: QWidget | None = None) -> None:
         super().__init__(parent, background="w")
@@ -64,7 +65,6 @@ class TopView(pg.PlotWidget):
                     pen.setCosmetic(True)
                     polygon.setPen(pen)
                     items.append(polygon)
-                    points.append(footprint[:, :2])
             marker = pg.ScatterPlotItem(
                 [position[0]], [position[1]], symbol="s", size=10, brush=pg.mkBrush(*SENSOR_COLOR)
             )
@@ -76,8 +76,9 @@ class TopView(pg.PlotWidget):
                 self.addItem(item)
             self._coverage[sensor_id] = items
         if points:
+            # Frame the cameras (they stand around the venue), not their whole range.
             everything = np.vstack(points)
-            low, high = everything.min(axis=0) - 0.5, everything.max(axis=0) + 0.5
+            low, high = everything.min(axis=0) - 1.0, everything.max(axis=0) + 1.0
             self.setRange(xRange=(low[0], high[0]), yRange=(low[1], high[1]), padding=0)
 
     # ----------------------------------------------------------------- tracks

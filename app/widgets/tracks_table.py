@@ -43,8 +43,15 @@ class TracksModel(QAbstractTableModel):
         self.tracks: list[Track] = []
 
     def set_batch(self, batch: TrackBatch) -> None:
+        tracks = sorted(batch.tracks, key=lambda t: t.id)
+        if [t.id for t in tracks] == [t.id for t in self.tracks] and tracks:
+            # The same people: new values in place, so the operator's selection stays.
+            self.tracks = tracks
+            last = self.index(len(tracks) - 1, len(COLUMNS) - 1)
+            self.dataChanged.emit(self.index(0, 0), last)
+            return
         self.beginResetModel()
-        self.tracks = sorted(batch.tracks, key=lambda t: t.id)
+        self.tracks = tracks
         self.endResetModel()
 
     def rowCount(self, parent: QModelIndex = QModelIndex()) -> int:  # noqa: N802, B008 - Qt

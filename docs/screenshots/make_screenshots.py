@@ -6,7 +6,11 @@
 Every picture shows real values: the window without a site, the Parameters
 panel built from optrack's schemas, and the Sensors dock showing PCL's real
 Kinect frame of five people with the boxes optrack's detector finds in it
-(from ../shared/data).
+(from ../shared/data). The main window against the embedded site is taken
+by the application itself:
+
+    QT_QPA_PLATFORM=xcb xvfb-run -a -s "-screen 0 1280x1024x24" \
+        .venv/bin/optrack gui --screenshot docs/screenshots/main-window.png --quit-after 30
 """
 
 from __future__ import annotations
@@ -42,6 +46,7 @@ def five_people():
 
 
 def main() -> int:
+    from PySide6.QtCore import QEventLoop, QTimer
     from PySide6.QtWidgets import QApplication
 
     from app.main import configure_qt
@@ -51,14 +56,17 @@ def main() -> int:
     from app.main_window import MainWindow
     from app.widgets.sensors_panel import SensorsPanel
 
-    def settle() -> None:
-        for _ in range(5):
-            app.processEvents()
+    def settle(ms: int = 1500) -> None:
+        """Let the window lay itself out and paint, as it does on screen."""
+        loop = QEventLoop()
+        QTimer.singleShot(ms, loop.quit)
+        loop.exec()
 
     window = MainWindow()
+    window.log_panel.append("info", "No site connected (--no-site).")
     window.show()
     settle()
-    window.grab().save(str(HERE / "main-window-no-site.png"))
+    window.screenshot().save(str(HERE / "main-window-no-site.png"))
     window.docks["Parameters"].raise_()
     window.parameters.pages.setCurrentIndex(0)
     settle()

@@ -68,24 +68,24 @@ CORNER_PARAMS = register(
             ),
             Param(
                 "fast_check",
-                False,
-                help="Quickly skip images without a board (OpenCV's CALIB_CB_FAST_CHECK; it "
-                "also misses small boards).",
+                True,
+                help="Quickly skip images without a board (OpenCV's CALIB_CB_FAST_CHECK).",
             ),
             Param(
                 "infrared_equalize",
                 True,
-                help="Equalise the histogram of infrared images before looking for corners.",
+                help="Equalise the histogram of infrared images before looking for the board.",
             ),
             Param(
-                "infrared_min_width",
-                640,
+                "search_width",
+                1024,
                 min=0,
                 max=4096,
                 step=16,
                 unit="px",
-                help="Infrared images narrower than this are upsampled by a whole factor "
-                "before corner detection (OpenPTrack's trick for the 176x144 SR4500).",
+                help="Narrower images are searched for the board upsampled to this width: "
+                "small boards are found far more often (OpenPTrack's trick for the 176x144 "
+                "SR4500, used for every camera). 0: never upsample.",
             ),
             Param(
                 "max_detection_width",
@@ -94,8 +94,8 @@ CORNER_PARAMS = register(
                 max=8192,
                 step=16,
                 unit="px",
-                help="Wider images are searched for the board at a reduced size; the corners "
-                "are then refined at full resolution.",
+                help="Wider images are searched for the board at this width; the corners are "
+                "then refined at full resolution.",
             ),
             Param(
                 "coverage_cells",
@@ -263,10 +263,6 @@ def _canonical_order(corners: np.ndarray, gray: np.ndarray, board: Checkerboard)
     return np.ascontiguousarray(grid.reshape(-1, 2))
 
 
-def _upsample_factor(width: int, min_width: int) -> int:
-    return max(1, math.ceil(min_width / width)) if min_width > 0 and width > 0 else 1
-
-
 def find_corners(
     image: np.ndarray,
     board: Checkerboard,
@@ -276,28 +272,29 @@ def find_corners(
 ) -> np.ndarray | None:
     """The board's inner corners in ``image`` (Nx2 float64 pixels, board order), or None.
 
-    Colour images are converted to grey. Infrared images (8 or 16 bit) are
-    scaled to 8 bits and searched for the board histogram-equalised and, when
-    narrower than ``infrared_min_width``, upsampled by a whole factor
-    (OpenPTrack's SR4500 procedure). Corners are refined to sub-pixel accuracy
-    in the original, unequalised image (equalising moves edges; upsampled when
-    the squares are too small for a 3-pixel window) and returned in the
-    original image's pixels (pixel centres at integers).
+    Colour images are converted to grey; infrared images (8 or 16 bit) are
+    scaled to 8 bits and, for the search, histogram-equalised. The search
+    runs on the image resized to ``search_width`` when it is narrower (small
+    boards are found far more often: OpenPTrack's SR4500 trick) or to
+    ``max_detection_width`` when it is wider. Corners are then refined to
+    sub-pixel accuracy in the original, unequalised image (equalising moves
+    edges), or in the upsampled one when the squares are too small for a
+    3-pixel window, and returned in the original image's pixels (pixel
+    centres at integers).
     """
     p = params if params is not None else CORNER_PARAMS.create()
     gray = to_gray(image)  # linear in the light: sub-pixel refinement works on this one
-    detect = gray
-    factor = 1
-    if infrared:
-        if p.infrared_equalize:
-            detect = cv2.equalizeHist(gray)
-        factor = _upsample_factor(gray.shape[1], int(p.infrared_min_width))
-    search, scale = detect, float(factor)
-    if factor > 1:
-        search = cv2.resize(detect, None, fx=factor, fy=factor, interpolation=cv2.INTER_CUBIC)
-    elif gray.shape[1] > p.max_detection_width:
-        scale = float(p.max_detection_width) / gray.shape[1]
-        search = cv2.resize(detect, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    detect = cv2.equalizeHist(gray) if infrared and p.infrared_equalize else gray
+    width = gray.shape[1]
+    scale = 1.0
+    if 0 < width < p.search_width:
+        scale = float(p.search_width) / width
+    elif width > p.max_detection_width:
+        scale = float(p.max_detection_width) / width
+    search = detect
+    if scale != 1.0:
+        interpolation = cv2.INTER_CUBIC if scale > 1 else cv2.INTER_AREA
+        search = cv2.resize(detect, None, fx=scale, fy=scale, interpolation=interpolation)
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
     if p.fast_check:
         flags |= cv2.CALIB_CB_FAST_CHECK
@@ -312,9 +309,9 @@ def find_corners(
     )
     native = (corners + 0.5) / scale - 0.5
     window = _subpix_window(native, board, int(p.subpix_window))
-    if factor > 1 and window < 3:  # squares too small here: refine where they are larger
+    if scale > 1 and window < 3:  # squares too small here: refine where they are larger
         window = _subpix_window(corners, board, int(p.subpix_window))
-        larger = cv2.resize(gray, None, fx=factor, fy=factor, interpolation=cv2.INTER_CUBIC)
+        larger = cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_CUBIC)
         refined = cv2.cornerSubPix(
             larger, corners.reshape(-1, 1, 2), (window, window), (-1, -1), criteria
         ).reshape(-1, 2)

@@ -15,9 +15,11 @@ border) is in the board's plane and its face looks up in the camera (within
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import heapq
 import math
+import os
 import sys
 from collections.abc import Callable, Iterator, Mapping
 
@@ -289,56 +291,64 @@ def calibrate_recording(
     instants = floor_instants = 0
     start: float | None = None
     report = progress or (lambda message: None)
-    for bin_entries in _bins(recording, float(sp.view_rate_hz)):
-        found: dict[str, np.ndarray] = {}
-        on_floor_votes: list[bool] = []
-        t = min(e.t for e in bin_entries.values())
-        start = t if start is None else start
-        for sid, entry in sorted(bin_entries.items()):
-            if sid not in usable:
-                continue
-            kind, k = usable[sid]
-            frame = recording.load(sid, entry, (kind,))
-            image = frame.infrared if kind == "infrared" else frame.color
-            if image is None:
-                continue
-            corners = find_corners(image, board, cp, infrared=(kind == "infrared"))
-            if corners is None:
-                previous.pop(sid, None)
-                continue
-            moved = (
-                float(np.sqrt(np.mean(np.sum((corners - previous[sid]) ** 2, axis=1))))
-                if sid in previous
-                else math.inf
-            )
-            previous[sid] = corners
-            if sp.max_motion_px > 0 and moved > sp.max_motion_px:
-                continue
-            detections[sid] += 1
-            found[sid] = corners
-            depth_registered = kind == "infrared" or recording.sensors[sid].color_intrinsics is None
-            if floor == "auto" and depth_registered:
-                view = observe_board(sid, corners, k, board)
-                on_floor_votes.append(
-                    board_on_floor(view, frame.depth_m(), k, board, sp, thickness)
+
+    def look(sid: str, entry: IndexEntry) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """(corners, depth in metres when it is registered to the image) of one frame."""
+        kind, _ = usable[sid]
+        frame = recording.load(sid, entry, (kind,))
+        image = frame.infrared if kind == "infrared" else frame.color
+        if image is None:
+            return None, None
+        corners = find_corners(image, board, cp, infrared=(kind == "infrared"))
+        registered = kind == "infrared" or recording.sensors[sid].color_intrinsics is None
+        depth = frame.depth_m() if corners is not None and registered else None
+        return corners, depth
+
+    workers = max(1, min(len(usable), os.cpu_count() or 1))
+    with concurrent.futures.ThreadPoolExecutor(workers) as pool:  # OpenCV releases the GIL
+        for bin_entries in _bins(recording, float(sp.view_rate_hz)):
+            found: dict[str, np.ndarray] = {}
+            on_floor_votes: list[bool] = []
+            t = min(e.t for e in bin_entries.values())
+            start = t if start is None else start
+            chosen = sorted(sid for sid in bin_entries if sid in usable)
+            looked = pool.map(look, chosen, [bin_entries[sid] for sid in chosen])
+            for sid, (corners, depth) in zip(chosen, looked, strict=True):
+                if corners is None:
+                    previous.pop(sid, None)
+                    continue
+                moved = (
+                    float(np.sqrt(np.mean(np.sum((corners - previous[sid]) ** 2, axis=1))))
+                    if sid in previous
+                    else math.inf
                 )
-        if not found:
-            continue
-        if floor_after is not None:
-            is_floor = t - start >= floor_after
-        elif floor == "auto":
-            is_floor = bool(on_floor_votes) and sum(on_floor_votes) * 2 > len(on_floor_votes)
-        else:
-            is_floor = False
-        feedback = calibrator.add(found, floor=is_floor)
-        instants += 1
-        floor_instants += int(is_floor)
-        calibrated = sum(1 for st in feedback.sensors.values() if st.calibrated)
-        report(
-            f"t={t - start:6.1f} s: board seen by {', '.join(sorted(found))}"
-            f"{' (on the floor)' if is_floor else ''}; {calibrated}/{len(feedback.sensors)} "
-            "sensors calibrated"
-        )
+                previous[sid] = corners
+                if sp.max_motion_px > 0 and moved > sp.max_motion_px:
+                    continue
+                detections[sid] += 1
+                found[sid] = corners
+                if floor == "auto" and depth is not None:
+                    view = observe_board(sid, corners, usable[sid][1], board)
+                    on_floor_votes.append(
+                        board_on_floor(view, depth, usable[sid][1], board, sp, thickness)
+                    )
+            if not found:
+                continue
+            if floor_after is not None:
+                is_floor = t - start >= floor_after
+            elif floor == "auto":
+                is_floor = bool(on_floor_votes) and sum(on_floor_votes) * 2 > len(on_floor_votes)
+            else:
+                is_floor = False
+            feedback = calibrator.add(found, floor=is_floor)
+            instants += 1
+            floor_instants += int(is_floor)
+            calibrated = sum(1 for st in feedback.sensors.values() if st.calibrated)
+            report(
+                f"t={t - start:6.1f} s: board seen by {', '.join(sorted(found))}"
+                f"{' (on the floor)' if is_floor else ''}; {calibrated}/{len(feedback.sensors)} "
+                "sensors calibrated"
+            )
     if instants == 0:
         raise SessionError(
             f"the {board.cols}x{board.rows} board was not found held still in any frame of "

@@ -88,7 +88,9 @@ def level_window(
     f = fill * out_h * distance / max(height, 1e-6)
     below = float(center @ down)  # how far the centre is below the optical centre
     cx, cy = (out_w - 1) / 2.0, (out_h - 1) / 2.0 - f * below / distance
-    K_virtual_inverse = np.array([[1.0 / f, 0.0, -cx / f], [0.0, 1.0 / f, -cy / f], [0.0, 0.0, 1.0]])
+    K_virtual_inverse = np.array(
+        [[1.0 / f, 0.0, -cx / f], [0.0, 1.0 / f, -cy / f], [0.0, 0.0, 1.0]]
+    )
     return np.asarray(K, dtype=np.float64) @ camera_R_virtual @ K_virtual_inverse
 
 

@@ -64,13 +64,13 @@ class Candidate:
         return float(np.ptp(self.points[:, 0]))
 
     def head_ratio(self, head_fraction: float) -> float:
-        """Width of its top ``head_fraction`` over its whole width, across the camera's
-        view (ground-frame x, which depth noise and flying pixels hardly widen): small
-        for a person (a head on shoulders), near 1 for a flat top (a partition, a box)."""
-        x, z = self.points[:, 0], self.points[:, 2]
-        whole = float(np.ptp(x))
-        top = x[z >= self.height * (1.0 - head_fraction)]
-        return float(np.ptp(top)) / whole if whole > 0 else 1.0
+        """Floor extent of its top ``head_fraction`` over its whole floor extent (the
+        larger side of each bounding box): small for a person (a head on shoulders),
+        near 1 for a flat top (a partition, a box, seen from any side)."""
+        floor, z = self.points[:, :2], self.points[:, 2]
+        whole = float(np.ptp(floor, axis=0).max())
+        top = floor[z >= self.height * (1.0 - head_fraction)]
+        return float(np.ptp(top, axis=0).max()) / whole if whole > 0 else 1.0
 
     @property
     def center(self) -> np.ndarray:

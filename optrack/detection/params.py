@@ -288,8 +288,8 @@ DETECTION_PARAMS = register(
                 min=0.1,
                 max=1.0,
                 step=0.05,
-                help="A person has a head: the width of their top head_fraction (across the "
-                "camera's view) is at most this fraction of their whole width (1: no check, as PCL).",
+                help="A person has a head: the floor extent of their top head_fraction is at "
+                "most this fraction of their whole floor extent (1: no check, as PCL).",
             ),
             Param(
                 "subcluster_min_points_factor",

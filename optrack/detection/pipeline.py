@@ -50,6 +50,21 @@ __all__ = ["Judgement", "PeopleDetector"]
 CROP_ROWS = 64
 
 
+def _transform(a_T_b: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``a_T_b`` applied to ...x3 points, element-wise (a BLAS product on a tall Nx3
+    array is many times slower, and slower still on a busy machine)."""
+    r, t = a_T_b[:3, :3], a_T_b[:3, 3]
+    x, y, z = points[..., 0], points[..., 1], points[..., 2]
+    return np.stack(
+        [
+            x * r[0, 0] + y * r[0, 1] + z * r[0, 2] + t[0],
+            x * r[1, 0] + y * r[1, 1] + z * r[1, 2] + t[1],
+            x * r[2, 0] + y * r[2, 1] + z * r[2, 2] + t[2],
+        ],
+        axis=-1,
+    )
+
+
 @dataclasses.dataclass
 class Judgement:
     """What the detector made of one candidate (kept for inspection and tests)."""
@@ -188,7 +203,7 @@ class PeopleDetector:
             else:
                 foreground = foreground[self.background.foreground(foreground)]
         g_T_c = ground_T_camera(plane)
-        candidates = person_candidates(transform_points(g_T_c, foreground), p)
+        candidates = person_candidates(_transform(g_T_c, foreground), p)
         if not candidates:
             return batch([])
 
@@ -260,27 +275,33 @@ class PeopleDetector:
         fill = float(p.hog_window_fill)
         to_depth = level_window(center_c, height, plane.normal, cloud.intrinsics.K, fill)
 
-        # The candidate's pixels: a strided crop of its window, in the ground frame.
         rows_img, cols_img = cloud.shape
         person_px = abs(float(pixels[1][1] - pixels[0][1]))
         stride = max(1, round(person_px / fill / CROP_ROWS))
         u0, v0, u1, v1 = window_footprint(to_depth, cloud.shape)
-        if u1 > u0 and v1 > v0:
-            crop_c = cloud.grid(slice(v0, v1, stride), slice(u0, u1, stride))
-            crop_g = transform_points(g_T_c, crop_c)
-        else:
-            crop_c = crop_g = np.full((0, 0, 3), np.nan)
-        valid = np.isfinite(crop_g[..., 2])
-        with np.errstate(invalid="ignore"):
-            mask = (
-                valid
-                & (np.hypot(crop_g[..., 0] - hx, crop_g[..., 1] - hy) < float(p.person_radius))
-                & (crop_g[..., 2] > float(p.ground_inlier_distance))
-                & (crop_g[..., 2] < height + float(p.voxel_size))
-            )
 
+        def candidate_pixels() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+            """A strided crop of the window (camera and ground frame), its valid pixels,
+            and the candidate's own: near its axis, above the floor, below its head."""
+            if u1 > u0 and v1 > v0:
+                crop_c = cloud.grid(slice(v0, v1, stride), slice(u0, u1, stride))
+                crop_g = _transform(g_T_c, crop_c)
+            else:
+                crop_c = crop_g = np.full((0, 0, 3), np.nan)
+            valid = np.isfinite(crop_g[..., 2])
+            with np.errstate(invalid="ignore"):
+                mask = (
+                    valid
+                    & (np.hypot(crop_g[..., 0] - hx, crop_g[..., 1] - hy) < float(p.person_radius))
+                    & (crop_g[..., 2] > float(p.ground_inlier_distance))
+                    & (crop_g[..., 2] < height + float(p.voxel_size))
+                )
+            return crop_c, crop_g, valid, mask
+
+        crop = None
         if source == "depth":
-            silhouette = (mask * np.uint8(255)).astype(np.uint8)
+            crop = candidate_pixels()
+            silhouette = (crop[3] * np.uint8(255)).astype(np.uint8)
             window = person_window(silhouette, to_depth, (u0, v0), stride)
             score = float(self.hog.scores([window])[0])
             accepted = score > float(p.min_depth_confidence)
@@ -294,26 +315,36 @@ class PeopleDetector:
             score = float(self.hog.scores([person_window(image, to_image)])[0])
             accepted = score > float(p.min_confidence)
 
-        # Flags, histogram, output box.
+        # Flags and histogram, of accepted candidates only (the others are not output).
         out_of_view = self._outside_fraction(pixels, person_px, (rows_img, cols_img)) > float(
             p.out_of_view_fraction
         )
-        occluded = self._occluded(
-            crop_g, valid, candidate, pixels, (u0, v0), stride, cloud.intrinsics, float(center_c[2])
-        )
+        occluded = False
         histogram: list[float] = []
-        if color is not None and np.any(mask):
-            if color_intrinsics is cloud.intrinsics:  # registered: the same pixels
-                person_colors = color[v0:v1:stride, u0:u1:stride][mask]
-            else:
-                uv, _ = project(crop_c[mask], color_intrinsics)
-                u = np.rint(uv[:, 0]).astype(np.int64)
-                v = np.rint(uv[:, 1]).astype(np.int64)
-                inside = (u >= 0) & (u < color.shape[1]) & (v >= 0) & (v < color.shape[0])
-                person_colors = color[v[inside], u[inside]]
-            histogram = hsv_histogram(
-                person_colors, int(p.histogram_hue_bins), int(p.histogram_saturation_bins)
+        if accepted:
+            crop_c, crop_g, valid, mask = crop if crop is not None else candidate_pixels()
+            occluded = self._occluded(
+                crop_g,
+                valid,
+                candidate,
+                pixels,
+                (u0, v0),
+                stride,
+                cloud.intrinsics,
+                float(center_c[2]),
             )
+            if color is not None and np.any(mask):
+                if color_intrinsics is cloud.intrinsics:  # registered: the same pixels
+                    person_colors = color[v0:v1:stride, u0:u1:stride][mask]
+                else:
+                    uv, _ = project(crop_c[mask], color_intrinsics)
+                    u = np.rint(uv[:, 0]).astype(np.int64)
+                    v = np.rint(uv[:, 1]).astype(np.int64)
+                    inside = (u >= 0) & (u < color.shape[1]) & (v >= 0) & (v < color.shape[0])
+                    person_colors = color[v[inside], u[inside]]
+                histogram = hsv_histogram(
+                    person_colors, int(p.histogram_hue_bins), int(p.histogram_saturation_bins)
+                )
         box_h = person_px * float(p.box_enlarge_factor)
         box_w = box_h / 2.0
         bx0 = max(0, int(pixels[2][0] - box_w / 2.0))

@@ -118,7 +118,7 @@ def select_points(
     confidence_threshold: float = 0,
 ) -> tuple[np.ndarray, int]:
     """Valid points of every ``sampling_factor``-th pixel in rows and columns
-    (Nx3 float64, camera frame), and how many pixels were looked at.
+    (Nx3 float32, camera frame), and how many pixels were looked at.
 
     A pixel is valid with depth in (0, max_distance] and, when a confidence
     image is given, confidence >= ``confidence_threshold``.
@@ -146,14 +146,16 @@ def select_points(
             ],
             axis=1,
         )
-    return np.ascontiguousarray(points, dtype=np.float64), z.size
+    return np.ascontiguousarray(points, dtype=np.float32), z.size
 
 
 def voxel_grid(points: np.ndarray, voxel_size: float) -> np.ndarray:
     """Centroid of the points in each occupied voxel (Open3D's voxel grid), Mx3 float64."""
     if len(points) == 0:
         return np.empty((0, 3))
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    cloud = o3d.geometry.PointCloud(
+        o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
+    )
     return np.asarray(cloud.voxel_down_sample(float(voxel_size)).points)
 
 
@@ -161,7 +163,9 @@ def denoise(points: np.ndarray, mean_k: int, std_dev: float) -> np.ndarray:
     """Drop statistical outliers (PCL's StatisticalOutlierRemoval, through Open3D)."""
     if len(points) <= mean_k:
         return points
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    cloud = o3d.geometry.PointCloud(
+        o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
+    )
     _, kept = cloud.remove_statistical_outlier(int(mean_k), float(std_dev))
     return points[np.asarray(kept, dtype=np.int64)]
 

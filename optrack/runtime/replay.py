@@ -7,8 +7,9 @@ next one, and a consumer that fell behind gets the newest frame due. The
 frames it skipped are never decoded (a 2-core computer cannot afford to
 decode frames it will not use) and are counted in :attr:`LiveReplay.skipped`.
 A frame is stamped with the instant it became due (its capture instant), on
-the clock the node gives, so that the time spent decoding and detecting
-counts in the node's latency. With ``loop`` the recording starts again at
+the clock the node gives; a frame not due yet is decoded while waiting for it
+(as a camera delivers a frame ready at capture), and a frame already due is
+decoded after, so that this time counts in the node's latency. With ``loop`` the recording starts again at
 its end, one frame period after its last frame.
 """
 
@@ -121,10 +122,7 @@ class LiveReplay(Sensor):
         k = max(self._next, self._last_due(self.clock()))
         if not self.loop and k >= n:
             return None
-        wait = self._due(k) - self.clock()
-        if wait > 0:
-            time.sleep(wait)
-        self.skipped += k - self._next
+        # Decode first: a frame not due yet is ready when it is (as a camera delivers it).
         entry = self.entries[k % n]
         try:
             if self.streams is None:
@@ -133,6 +131,10 @@ class LiveReplay(Sensor):
                 frame = self.recording.load(self.recorded_id, entry, self.streams)
         except RecordingError as error:
             raise SensorError(str(error)) from None
+        wait = self._due(k) - self.clock()
+        if wait > 0:
+            time.sleep(wait)
+        self.skipped += k - self._next
         frame.sensor_id = self.sensor_id
         frame.timestamp = self._due(k)
         frame.seq = k

@@ -20,6 +20,7 @@ kills what has not ended after ``site.stop_timeout_s``.
 from __future__ import annotations
 
 import dataclasses
+import json
 import logging
 import os
 import shutil
@@ -57,7 +58,8 @@ class Child:
 
     name: str
     role: str  # detector, tracker, outputs, gui
-    argv: list[str]
+    module: str
+    args: list[str]
     process: subprocess.Popen[bytes] | None = None
     state: str = "new"  # running, waiting (to restart), ended, stopped
     started_at: float = 0.0
@@ -74,6 +76,10 @@ class Child:
             "outputs": "outputs node",
             "gui": "operator application",
         }[self.role]
+
+    @property
+    def argv(self) -> list[str]:
+        return [sys.executable, "-m", self.module, *self.args]
 
     @property
     def pid(self) -> int | None:
@@ -151,6 +157,7 @@ class Site:
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._run_dir: Path | None = None
+        self._standby: subprocess.Popen[bytes] | None = None
 
     # ---------------------------------------------------------------- setup
     def sensor_uris(self) -> list[str]:
@@ -165,15 +172,16 @@ class Site:
         return [f"file://{path}?loop=true#{sid}" for sid in Recording(path).sensor_ids]
 
     def _write_configs(self, run_dir: Path) -> dict[str, Path]:
-        """The children's config files: the user's values, the hub to connect to, and only
-        the detection values the user set (each sensor model's defaults apply otherwise)."""
+        """The children's config files: the values the user's file set, the hub to connect
+        to, and the outputs (``--udp`` included). Stages left out keep their defaults (a
+        detector's ``detection`` defaults are its sensor model's)."""
         endpoint = f"tcp/127.0.0.1:{int(self.config['bus'].local_port)}"
-        common = {stage: params.as_dict() for stage, params in self.config.params.items()}
-        common["bus"].update(
+        common = {stage: dict(values) for stage, values in self.config.explicit.items()}
+        common.setdefault("bus", {}).update(
             {"mode": "client", "connect": endpoint, "multicast_scouting": False, "gossip": False}
         )
-        common["node"]["state_dir"] = str(state_dir(self.config, self.name))
-        common["detection"] = dict(self.config.explicit.get("detection", {}))
+        common.setdefault("node", {})["state_dir"] = str(state_dir(self.config, self.name))
+        common["outputs"] = self.config["outputs"].as_dict()
         paths = {}
         for role in ("detector", "tracker", "outputs"):
             values = {stage: dict(v) for stage, v in common.items()}
@@ -186,10 +194,8 @@ class Site:
         return paths
 
     def _children(self, uris: list[str], configs: dict[str, Path]) -> list[Child]:
-        from optrack.runtime.replay import LiveReplay  # noqa: F401 - fail early if broken
         from optrack.sensors.uri import parse_uri
 
-        python = [sys.executable, "-m"]
         children = []
         seen: set[str] = set()
         for k, uri in enumerate(uris):
@@ -201,52 +207,26 @@ class Site:
                     "id with ?id=NAME."
                 )
             seen.add(name)
+            args = ["node", "detect", "--sensor", uri, "--site", self.name]
             children.append(
                 Child(
-                    name,
-                    "detector",
-                    [
-                        *python,
-                        "optrack.cli",
-                        "node",
-                        "detect",
-                        "--sensor",
-                        uri,
-                        "--site",
-                        self.name,
-                        "--config",
-                        str(configs["detector"]),
-                    ],
+                    name, "detector", "optrack.cli", [*args, "--config", str(configs["detector"])]
                 )
             )
         children.append(
             Child(
                 "tracker",
                 "tracker",
-                [
-                    *python,
-                    "optrack.cli",
-                    "node",
-                    "track",
-                    "--site",
-                    self.name,
-                    "--config",
-                    str(configs["tracker"]),
-                ],
+                "optrack.cli",
+                ["node", "track", "--site", self.name, "--config", str(configs["tracker"])],
             )
         )
         children.append(
             Child(
                 "outputs",
                 "outputs",
-                [
-                    *python,
-                    "optrack.runtime.outputs_node",
-                    "--site",
-                    self.name,
-                    "--config",
-                    str(configs["outputs"]),
-                ],
+                "optrack.runtime.outputs_node",
+                ["--site", self.name, "--config", str(configs["outputs"])],
             )
         )
         if not self.headless:
@@ -254,23 +234,50 @@ class Site:
 
             problem = display_problem()
             if problem is None:
-                children.append(Child("gui", "gui", [*python, "optrack.cli", "gui"]))
+                args = ["gui", "--join", "--site", self.name]
+                if self.config.path is not None:
+                    args += ["--config", str(self.config.path)]
+                children.append(Child("gui", "gui", "optrack.cli", args))
             else:
                 log.info("no window (%s); running headless.", problem)
         return children
 
-    def _spawn(self, child: Child) -> None:
+    def _popen(self, argv: list[str], stdin: int) -> subprocess.Popen[bytes]:
         env = dict(os.environ)
         env[PARENT_ENV] = str(os.getpid())
         env["PYTHONUNBUFFERED"] = "1"
-        child.process = subprocess.Popen(
-            child.argv,
-            stdin=subprocess.DEVNULL,
+        return subprocess.Popen(
+            argv,
+            stdin=stdin,
             stdout=sys.stderr.fileno(),
             stderr=sys.stderr.fileno(),
             env=env,
             start_new_session=True,  # Ctrl-C reaches the launcher, which stops them in order
         )
+
+    def _spawn_standby(self) -> None:
+        self._standby = self._popen(
+            [sys.executable, "-m", "optrack.runtime.standby"], subprocess.PIPE
+        )
+
+    def _spawn(self, child: Child, standby: bool = False) -> None:
+        """Start a child; ``standby``: hand it to the waiting standby process (imports
+        done) and start a new standby."""
+        process = None
+        if standby and self._standby is not None and self._standby.poll() is None:
+            process, self._standby = self._standby, None
+            order = json.dumps({"module": child.module, "args": child.args}) + "\n"
+            try:
+                assert process.stdin is not None
+                process.stdin.write(order.encode("utf-8"))
+                process.stdin.close()
+            except OSError:  # the standby died meanwhile
+                process = None
+        if process is None:
+            process = self._popen(child.argv, subprocess.DEVNULL)
+        if standby:
+            self._spawn_standby()
+        child.process = process
         child.state = "running"
         child.started_at = time.monotonic()
 
@@ -287,6 +294,7 @@ class Site:
             for child in self.children:
                 if child.role == role:
                     self._spawn(child)
+        self._spawn_standby()
         log.info(
             "site '%s' on tcp/127.0.0.1:%d: %d detector node(s), tracker, outputs (%s)",
             self.name,
@@ -347,7 +355,7 @@ class Site:
                 )
                 self.publish_status()
             elif child.state == "waiting" and now >= child.restart_at:
-                self._spawn(child)
+                self._spawn(child, standby=child.role != "gui")
                 child.restarts += 1
                 log.info(
                     "restarted %s (restart %d, pid %s).", child.label, child.restarts, child.pid
@@ -434,6 +442,12 @@ class Site:
         for child in self.children:
             if child.state == "waiting":
                 child.state = "stopped"
+        standby, self._standby = self._standby, None
+        if standby is not None:
+            standby.terminate()  # nothing to clean up: it was only importing or waiting
+            standby.wait()
+            if standby.stdin is not None:
+                standby.stdin.close()
         if self.hub is not None:
             try:
                 self.publish_status()

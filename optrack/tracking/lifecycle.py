@@ -4,7 +4,9 @@ A track is born NEW from a detection no track took (with enough confidence),
 is validated after ``detections_to_validate`` detections that confident, becomes NORMAL
 ``sec_remain_new`` after its birth, MISSING when no sensor has detected it for
 ``sec_before_missing``, and is deleted ``sec_before_old`` after its last
-detection, or ``sec_before_fake`` after its birth if it was never validated.
+detection. A track never validated is deleted as fake ``sec_before_fake``
+after its birth (OpenPTrack), or as soon as it goes missing: a person just
+found is seen in every frame, a flickering false alarm is not.
 """
 
 from __future__ import annotations
@@ -51,6 +53,8 @@ class TrackState:
     validated: bool = False
     detections: int = 0
     confident_detections: int = 0  # with at least min_confidence_initialization
+    streak: int = 0  # detections since the last gap of sec_before_missing
+    confirmed: float = -np.inf  # last detection of a run long enough to trust
     sensors: dict[str, float] = dataclasses.field(default_factory=dict)
     #: filtered positions (t, x, y) after each update, in time order
     history: list[tuple[float, float, float]] = dataclasses.field(default_factory=list)
@@ -71,27 +75,40 @@ def on_detected(
     track.detections += 1
     if confidence >= params.min_confidence_initialization:
         track.confident_detections += 1
+    if t - track.last_detection >= params.sec_before_missing:
+        track.streak = 0  # seen again after a gap: a new run of detections
+    track.streak += 1
     track.last_detection = max(track.last_detection, t)
     track.sensors[sensor] = max(track.sensors.get(sensor, t), t)
     track.confidence = confidence
     track.height += (height - track.height) / track.detections
     if not track.validated and track.confident_detections >= params.detections_to_validate:
         track.validated = True
-    track.status = (
-        TrackStatus.NORMAL
-        if track.last_detection - track.born >= params.sec_remain_new
-        else TrackStatus.NEW
-    )
+    if track.streak >= params.detections_to_validate or not track.validated:
+        track.confirmed = track.last_detection
+    if track.confirmed >= track.last_detection:
+        track.status = (
+            TrackStatus.NORMAL
+            if track.last_detection - track.born >= params.sec_remain_new
+            else TrackStatus.NEW
+        )
 
 
 def advance(track: TrackState, now: float, params: Params) -> Fate:
-    """Update the status with the time ``now``; say whether the track lives on."""
-    if not track.validated and now - track.born >= params.sec_before_fake:
-        return Fate.FAKE
+    """Update the status with the time ``now``; say whether the track lives on.
+
+    A track found again after it went missing is seen (and kept alive) only
+    once ``detections_to_validate`` detections in a row confirm it: one stray
+    detection (a false alarm in its wide gate) does not keep a lost track.
+    """
     unseen = now - track.last_detection
-    if unseen >= params.sec_before_old:
+    if not track.validated and (
+        now - track.born >= params.sec_before_fake or unseen >= params.sec_before_missing
+    ):
+        return Fate.FAKE
+    if now - track.confirmed >= params.sec_before_old:
         return Fate.OLD
-    if unseen >= params.sec_before_missing:
+    if unseen >= params.sec_before_missing or track.confirmed < track.last_detection:
         track.status = TrackStatus.MISSING
     return Fate.KEEP
 

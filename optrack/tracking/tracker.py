@@ -231,7 +231,7 @@ class Tracker:
             positions, last_seen, unseen, p.max_speed, p.min_reach
         )
         # a detection too weak to start a track cannot revive a missing one either
-        missing = np.array([t - tr.last_detection for tr in tracks]) >= p.sec_before_missing
+        missing = np.array([t - tr.confirmed for tr in tracks]) >= p.sec_before_missing
         weak = confidence < p.min_confidence_initialization
         allowed &= ~(missing[:, None] & weak[None, :])
         if features is not None:
@@ -297,7 +297,7 @@ class Tracker:
             for i, tr in enumerate(self.tracks)
             if i not in skip
             and tr.validated
-            and t - tr.last_detection >= wait
+            and t - tr.confirmed >= wait
             and (c := self.appearance.classifiers.get(tr.id)) is not None
             and c.trained
         ]
@@ -325,7 +325,7 @@ class Tracker:
             [self.appearance.confidence(self.tracks[i].id, features[free]) for i in candidates]
         )
         last = np.array([_last_seen(self.tracks[i]) for i in candidates])
-        lost_for = np.array([t - self.tracks[i].last_detection for i in candidates])
+        lost_for = np.array([t - self.tracks[i].confirmed for i in candidates])
         distance = np.linalg.norm(positions[free][None, :, :] - last[:, None, :], axis=2)
         allowed = (conf >= self.appearance_params.min_confidence) & (
             distance <= self._reach(lost_for)[:, None]
@@ -333,7 +333,7 @@ class Tracker:
         out = []
         for a, b in assign(-conf, allowed):
             track, j = self.tracks[candidates[a]], int(free[b])
-            lost_since = track.last_detection
+            lost_since = track.confirmed
             x, P = self._initial_state(positions[j], position_var[j])
             self._take(track, max(track.t, t), x, P, t, sensor, detections[j])
             self._absorb_young(track, positions[j], lost_since)
@@ -390,15 +390,15 @@ class Tracker:
             best: tuple[float, int | None, int] = (a.min_confidence, None, 0)
             here = np.array(track.history[0][1:] if track.history else track.x[:2])
             for other in self.tracks:
-                if other is track or not other.validated or other.last_detection >= track.born:
+                if other is track or not other.validated or other.confirmed >= track.born:
                     continue
-                if track.born - other.last_detection < a.sec_missing_before_recovery:
+                if track.born - other.confirmed < a.sec_missing_before_recovery:
                     continue
                 c = self.appearance.classifiers.get(other.id)
                 if c is None or not c.trained:
                     continue
                 last = np.array(_last_seen(other))
-                reach = self._reach(np.array([track.born - other.last_detection]))[0]
+                reach = self._reach(np.array([track.born - other.confirmed]))[0]
                 if np.linalg.norm(here - last) > reach:
                     continue
                 score = float(np.mean(self.appearance.confidence(other.id, F)))
@@ -481,7 +481,7 @@ class Tracker:
                 kept.append(track)
             elif fate is Fate.OLD:
                 x, y = _last_seen(track)
-                self.appearance.forget(track.id, x, y, track.last_detection, now)
+                self.appearance.forget(track.id, x, y, track.confirmed, now)
             else:
                 self.appearance.drop(track.id)
         self.tracks = kept

@@ -1,5 +1,40 @@
-"""Qt is configured as the application configures it, before pytest-qt makes its QApplication."""
+"""Qt is configured as the application configures it, before pytest-qt makes its QApplication;
+and an embedded site of its own for the tests that start one."""
+
+import socket
+
+import pytest
+import yaml
 
 from app.main import configure_qt
 
 configure_qt()
+
+# A short venue: rendered once per computer (cached by optrack.runtime.site), then looped.
+VENUE = {"scenario": "mixed", "seed": 0, "venue_seconds": 4.0}
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@pytest.fixture(scope="session")
+def site_config(tmp_path_factory):
+    """The configuration of a site on its own loopback port (other sites on this computer
+    are left alone), its venue rendered beforehand so that timings are the site's start."""
+    from optrack.runtime.site import venue_recording
+
+    venue_recording(VENUE["scenario"], VENUE["seed"], VENUE["venue_seconds"])
+    path = tmp_path_factory.mktemp("site") / "site.yaml"
+    path.write_text(
+        yaml.safe_dump(
+            {
+                "bus": {"local_port": free_port()},
+                "site": {**VENUE, "name": "guitest", "report_s": 0.0},
+                "outputs": {"udp": ""},
+            }
+        )
+    )
+    return path

@@ -1,18 +1,12 @@
 """The GUI's bus client against a real Zenoh hub on loopback (no display needed)."""
 
-import socket
-
 import pytest
 
 from app.bus_source import BusSource
 from optrack.net import BUS_PARAMS, Bus, ParamsMessage, StatusMessage, TracksMessage
 from optrack.types import Track, TrackBatch
 
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
+from .conftest import free_port
 
 
 @pytest.fixture

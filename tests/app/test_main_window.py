@@ -119,11 +119,13 @@ def test_view_parameters_change_the_window_not_the_nodes(qtbot, window):
     assert window.world.track_radius == 0.4
 
 
-def test_optrack_gui_takes_a_screenshot_and_quits(tmp_path):
+def test_optrack_gui_starts_its_site_takes_a_screenshot_and_quits(tmp_path, site_config):
+    """The default: the window starts the embedded site; quitting stops it, exit status 0."""
     shot = tmp_path / "window.png"
     optrack = os.path.join(os.path.dirname(sys.executable), "optrack")
     result = subprocess.run(
-        [optrack, "gui", "--screenshot", str(shot), "--quit-after", "2"],
+        [optrack, "gui", "--config", str(site_config), "--screenshot", str(shot)]
+        + ["--quit-after", "3"],
         capture_output=True,
         text=True,
         timeout=120,
@@ -133,6 +135,21 @@ def test_optrack_gui_takes_a_screenshot_and_quits(tmp_path):
     assert (image.width(), image.height()) == (1280, 800)
     pixels = image_array(image)
     assert len(np.unique(pixels.reshape(-1, 3), axis=0)) > 10
+    leftover = subprocess.run(["pgrep", "-f", str(site_config)], capture_output=True, text=True)
+    assert leftover.stdout == "", "the embedded site's processes outlived the window"
+
+
+def test_optrack_gui_without_a_site(tmp_path):
+    shot = tmp_path / "window.png"
+    optrack = os.path.join(os.path.dirname(sys.executable), "optrack")
+    result = subprocess.run(
+        [optrack, "gui", "--no-site", "--screenshot", str(shot), "--quit-after", "1"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    assert QImage(str(shot)).width() == 1280
 
 
 def test_a_calibration_file_shows_its_cameras_without_a_site(window, tmp_path):

@@ -125,3 +125,22 @@ def test_preview_says_when_a_sensor_has_no_such_stream(qtbot):
     panel.stream_choice.setCurrentIndex(panel.stream_choice.findData("infrared"))
     assert panel.preview.image is None
     assert panel.preview.message == "Sensor 'door' sends no infrared image."
+
+
+def test_a_detectors_status_is_listed_under_its_sensor(qtbot):
+    panel = SensorsPanel()
+    qtbot.addWidget(panel)
+    panel.set_status(
+        "kinect2_0",
+        {
+            "role": "detector",
+            "state": "starting",
+            "sensor": "file:///venue?loop=true#kinect2_0",
+            "fps": 0.0,
+            "clock_offset_ms": -0.0,
+        },
+    )
+    shown = panel.status_text("kinect2_0")
+    assert shown["offset\n(ms)"] == "+0.0"
+    assert shown["last error"] == "node starting"
+    assert "file:///venue" in panel.table.item(0, 0).toolTip()

@@ -117,4 +117,15 @@ def test_top_view_shows_the_floor_each_calibrated_camera_covers(qtbot):
     np.testing.assert_allclose(footprint.mean(axis=0), [2.0, 1.0], atol=1e-9)
     assert "uncalibrated_intrinsics" not in view.footprints  # no intrinsics: no footprint
     (x0, x1), (y0, y1) = view.viewRange()
-    assert x0 <= -3.0 and x1 >= 2.0 + 320 / 525 * 3  # both cameras in sight
+    assert x0 <= -3.0 and x1 >= 2.0  # both cameras in sight
+
+
+def test_a_selected_track_stays_selected_while_it_moves(qtbot):
+    table = TracksTable()
+    qtbot.addWidget(table)
+    table.set_batch(two_people(10.0))
+    table.view.selectRow(1)
+    table.set_batch(batch(10.1, Track(3, -2.0, 2.2, 1.6), Track(7, 1.3, -0.5, 1.72), seq=43))
+    selected = table.view.selectionModel().selectedRows()
+    assert [table.model.index(i.row(), 0).data() for i in selected] == ["7"]
+    assert table.model.index(1, 1).data() == "1.30"

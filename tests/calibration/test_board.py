@@ -86,7 +86,7 @@ def test_low_resolution_infrared_board_is_found_after_equalising_and_upsampling(
     corners = find_corners(dim, board, infrared=True)
     assert corners is not None
     assert np.sqrt(np.mean(np.sum((corners - truth) ** 2, axis=1))) < 0.35
-    plain = CORNER_PARAMS.create({"infrared_min_width": 0, "infrared_equalize": False})
+    plain = CORNER_PARAMS.create({"search_width": 0, "infrared_equalize": False})
     without = find_corners(dim, board, plain, infrared=True)
     if without is not None:  # found anyway: the trick must not make it worse
         worse = np.sqrt(np.mean(np.sum((without - truth) ** 2, axis=1)))

@@ -63,41 +63,46 @@ def make_client(hub, bus_params):
 
 
 class Processes:
-    """Child processes started by a test; each is stopped (then killed) at the end."""
+    """Child processes started by a test, their output in log files; each is stopped
+    (then killed, with anything left in its process group) at the end."""
 
-    def __init__(self) -> None:
-        self.started: list[subprocess.Popen[bytes]] = []
+    def __init__(self, logs: Path) -> None:
+        self.logs = logs
+        self.started: list[tuple[subprocess.Popen[bytes], Path]] = []
 
-    def start(self, args: list[str], **kwargs) -> subprocess.Popen[bytes]:
-        env = {**os.environ, "PYTHONUNBUFFERED": "1", **kwargs.pop("env", {})}
-        process = subprocess.Popen(
-            [sys.executable, "-m", *args],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            env=env,
-            start_new_session=True,
-            **kwargs,
-        )
-        self.started.append(process)
+    def start(self, args: list[str], name: str, env: dict[str, str] | None = None):
+        log = self.logs / f"{name}.log"
+        with log.open("wb") as out:
+            process = subprocess.Popen(
+                [sys.executable, "-m", *args],
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})},
+                start_new_session=True,
+            )
+        self.started.append((process, log))
         return process
 
+    def output(self, process: subprocess.Popen[bytes]) -> str:
+        for p, log in self.started:
+            if p is process:
+                return log.read_text(errors="replace")
+        return ""
+
     def stop_all(self) -> None:
-        for process in self.started:
+        for process, _ in self.started:
             if process.poll() is None:
                 process.send_signal(signal.SIGTERM)
-        for process in self.started:
+        for process, _ in self.started:
             try:
-                process.wait(10)
+                process.wait(15)
             except subprocess.TimeoutExpired:
                 os.killpg(process.pid, signal.SIGKILL)
                 process.wait()
-            # A launcher's own children are in their own sessions: kill any left.
-            if process.stdout is not None:
-                process.stdout.close()
 
 
 @pytest.fixture
-def processes() -> Iterator[Processes]:
-    p = Processes()
+def processes(tmp_path) -> Iterator[Processes]:
+    p = Processes(tmp_path)
     yield p
     p.stop_all()
