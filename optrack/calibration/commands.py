@@ -238,6 +238,23 @@ def _truth_poses(recording: Any) -> dict[str, np.ndarray]:
     }
 
 
+def _floor_truth(recording: Any, timeline: list[tuple[float, bool]]) -> dict[str, int]:
+    """How many instants were wrongly taken for (or not taken for) the board on the floor,
+    when the recording's ground truth has the board."""
+    if not recording.has_ground_truth or not timeline:
+        return {}
+    truth = [(g.t, g.boards[0].on_floor) for g in recording.ground_truth() if g.boards]
+    if not truth:
+        return {}
+    times = np.array([t for t, _ in truth])
+    wrong_floor = missed_floor = 0
+    for t, on_floor in timeline:
+        actual = truth[int(np.argmin(np.abs(times - t)))][1]
+        wrong_floor += int(on_floor and not actual)
+        missed_floor += int(actual and not on_floor)
+    return {"floor_views_wrong": wrong_floor, "floor_views_missed": missed_floor}
+
+
 def cmd_network(args: argparse.Namespace) -> int:
     """Calibrate every sensor of a recorded checkerboard session."""
     from optrack.calibration.quality import calibration_errors
@@ -310,6 +327,7 @@ def cmd_network(args: argparse.Namespace) -> int:
         "detections": session.detections,
         "solve_seconds": network.seconds,
     }
+    payload.update(_floor_truth(recording, session.timeline))
     truth = _truth_poses(recording)
     if truth and network.world == "floor":
         errors = calibration_errors(network.world_T_camera, truth)

@@ -55,7 +55,7 @@ SESSION_PARAMS = register(
         [
             Param(
                 "view_rate_hz",
-                4.0,
+                2.0,
                 min=0.1,
                 max=60.0,
                 unit="Hz",
@@ -240,6 +240,7 @@ class SessionResult:
     instants: int
     floor_instants: int
     detections: dict[str, int]
+    timeline: list[tuple[float, bool]]  # (time, on the floor) of every instant used
 
 
 def calibrate_recording(
@@ -289,6 +290,7 @@ def calibrate_recording(
     previous: dict[str, np.ndarray] = {}
     detections = dict.fromkeys(usable, 0)
     instants = floor_instants = 0
+    timeline: list[tuple[float, bool]] = []
     start: float | None = None
     report = progress or (lambda message: None)
 
@@ -341,6 +343,7 @@ def calibrate_recording(
             else:
                 is_floor = False
             feedback = calibrator.add(found, floor=is_floor)
+            timeline.append((t, is_floor))
             instants += 1
             floor_instants += int(is_floor)
             calibrated = sum(1 for st in feedback.sensors.values() if st.calibrated)
@@ -363,6 +366,7 @@ def calibrate_recording(
         instants=instants,
         floor_instants=floor_instants,
         detections=detections,
+        timeline=timeline,
     )
 
 

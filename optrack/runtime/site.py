@@ -418,6 +418,8 @@ class Site:
         """Stop the children in order (detectors, tracker, outputs), then the hub."""
         self._stop.set()
         timeout = float(self.params.stop_timeout_s)
+        started = time.monotonic()
+        killed = 0
         for roles in (("gui", "detector"), ("tracker",), ("outputs",)):
             group = [
                 c
@@ -438,6 +440,7 @@ class Site:
                     log.warning("%s did not stop within %.1f s; killing it.", child.label, timeout)
                     child.process.kill()
                     child.process.wait()
+                    killed += 1
                 child.state = "stopped"
         for child in self.children:
             if child.state == "waiting":
@@ -453,6 +456,13 @@ class Site:
                 self.publish_status()
             finally:
                 self.hub.close()
+        if self.children:
+            log.info(
+                "site stopped in %.1f s (%d node(s) stopped%s).",
+                time.monotonic() - started,
+                len(self.children),
+                f", {killed} killed" if killed else " cleanly",
+            )
         if self._run_dir is not None:
             shutil.rmtree(self._run_dir, ignore_errors=True)
             self._run_dir = None
@@ -465,7 +475,8 @@ class Site:
         }
         started = time.monotonic()
         try:
-            self.start()
+            self.start()  # the venue's one-time rendering does not count in --seconds
+            started = time.monotonic()
             deadline = started + self.seconds if self.seconds is not None else None
             report_s = float(self.params.report_s)
             next_report = time.monotonic() + report_s

@@ -45,13 +45,28 @@ def test_an_unvalidated_track_dies_after_sec_before_fake() -> None:
     assert tracker.tracks == []
 
 
-def test_a_track_seen_once_dies_at_sec_before_fake_not_sec_before_old() -> None:
+def test_an_unvalidated_track_that_goes_missing_dies_at_once() -> None:
+    """A person just found is seen in every frame; a flickering false alarm is not."""
     tracker = Tracker()
     tracker.update(_batch(0.0, 1.0))
-    _run(tracker, 0.1, 2.39)  # empty batches
+    _run(tracker, 0.1, 0.19)  # empty batches
     assert len(tracker.tracks) == 1
-    tracker.update(_batch(2.4, 5.0))
-    assert [tr.born for tr in tracker.tracks] == [2.4]  # the old one is gone, a new one born
+    _run(tracker, 0.19, 0.25)
+    assert tracker.tracks == []
+
+
+def test_a_stray_detection_does_not_keep_a_lost_track_alive() -> None:
+    tracker = Tracker()
+    _run(tracker, 0.0, 1.0, 1.0)
+    (track,) = tracker.tracks
+    for k in range(2, 9):  # lost; every second a single detection where it could be
+        _run(tracker, k - 1 + 0.04, k)
+        tracker.update(_batch(float(k), 1.0 + 0.3 * k))
+        assert tracker.output().tracks[0].status == "missing"
+    _run(tracker, 8.04, 8.95)
+    assert tracker.tracks == [track]
+    _run(tracker, 8.97, 9.02)
+    assert tracker.tracks == []  # sec_before_old after the last confirmed sighting
 
 
 def test_a_track_is_validated_by_detections_to_validate_confident_detections() -> None:

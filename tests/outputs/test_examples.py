@@ -1,0 +1,48 @@
+"""The Python receiver in examples/ reads what the outputs send."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from optrack.outputs import OUTPUTS_PARAMS, Outputs
+from optrack.types import Track, TrackBatch
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+
+
+def test_python_udp_receiver_prints_tracks_and_heartbeats(closed_port):
+    port = closed_port  # free now: the receiver binds it
+    receiver = subprocess.Popen(
+        [
+            sys.executable,
+            str(EXAMPLES / "python_udp_receiver.py"),
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--count",
+            "3",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert receiver.stdout.readline().startswith("listening on 127.0.0.1")
+        outputs = Outputs(OUTPUTS_PARAMS.create({"udp": f"127.0.0.1:{port}", "heartbeat_s": 60.0}))
+        try:
+            time.sleep(0.1)
+            outputs.publish(TrackBatch(stamp=10.0, tracks=[Track(4, 1.5, -0.25, 1.8, age=2.0)]))
+            outputs.publish(TrackBatch(stamp=10.1))
+            out, _ = receiver.communicate(timeout=10)
+        finally:
+            outputs.close()
+    finally:
+        receiver.kill()
+        receiver.wait()
+    lines = out.strip().splitlines()
+    assert "alive [] max 0" in lines[0]  # the heartbeat sent as the outputs start
+    assert lines[1] == "10.000 frame 1: #4 (+1.50, -0.25) 1.80 m"
+    assert lines[2] == "10.100 frame 2: nobody"
