@@ -24,9 +24,16 @@ class EmbeddedSite(QObject):
     progress = Signal(str)  # the line being rewritten (a progress bar)
     ended = Signal(int, str)  # exit code, the site's last line (its error sentence)
 
-    def __init__(self, config: str | Path | None = None, parent: QObject | None = None) -> None:
+    def __init__(
+        self,
+        config: str | Path | None = None,
+        parent: QObject | None = None,
+        command: list[str] | None = None,
+    ) -> None:
+        """``command`` replaces ``optrack run --headless`` (a program and its arguments)."""
         super().__init__(parent)
         self.config = str(config) if config else None
+        self.command = command or [sys.executable, *self.argv]
         self.process = QProcess(self)
         self.process.setProcessChannelMode(QProcess.ProcessChannelMode.MergedChannels)
         self.process.readyReadStandardOutput.connect(self._read)
@@ -43,7 +50,7 @@ class EmbeddedSite(QObject):
         return argv
 
     def start(self) -> None:
-        self.process.start(sys.executable, self.argv)
+        self.process.start(self.command[0], self.command[1:])
 
     @property
     def running(self) -> bool:

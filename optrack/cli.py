@@ -363,6 +363,17 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--out", required=True, help="file to write")
     q.add_argument("--parent", default="world", help="ROS parent frame (default world)")
     _add_json(q)
+    q = command(
+        "truth",
+        "Write a recording's true sensor poses as a calibration file (optionally perturbed).",
+        "optrack.calibration.commands:cmd_truth",
+        calibrate,
+    )
+    q.add_argument("recording", help="simulated recording (it knows its sensors' poses)")
+    q.add_argument("--out", required=True, help="calibration file to write")
+    q.add_argument("--perturb", metavar="M,DEG", help="move each sensor M metres, turn it DEG")
+    q.add_argument("--seed", type=int, default=0, help="seed of the perturbation's directions")
+    _add_json(q)
 
     # bench
     p = command(

@@ -40,6 +40,7 @@ __all__ = [
     "cmd_network",
     "cmd_refine",
     "cmd_stereo",
+    "cmd_truth",
 ]
 
 
@@ -658,6 +659,66 @@ def cmd_refine(args: argparse.Namespace) -> int:
             f"wrote {args.out}: mean distance between sensors' detections "
             f"{result.error_before_m * 100:.1f} cm -> {result.error_after_m * 100:.1f} cm"
         )
+    return 0
+
+
+# ----------------------------------------------------------------------- truth
+
+
+def cmd_truth(args: argparse.Namespace) -> int:
+    """Write a recording's true sensor poses as a calibration file, optionally perturbed
+    (to measure refinement, or to track with a known calibration)."""
+    from optrack.calibration.synthetic import perturb_poses
+    from optrack.recording import Recording
+
+    recording = Recording(args.recording)
+    truth = {
+        sid: np.asarray(info.world_T_camera, dtype=np.float64)
+        for sid, info in recording.sensors.items()
+        if info.world_T_camera is not None
+    }
+    if not truth:
+        raise CalibrateError(
+            f"recording {recording.path} does not know its sensors' poses; only simulated "
+            "recordings (or ones recorded with a calibration) do."
+        )
+    translation = rotation = 0.0
+    if args.perturb:
+        try:
+            translation, rotation = (float(v) for v in args.perturb.split(","))
+        except ValueError:
+            raise CalibrateError(
+                f"--perturb must be METRES,DEGREES, e.g. 0.1,2; got '{args.perturb}'."
+            ) from None
+        truth = perturb_poses(truth, translation, rotation, seed=args.seed)
+    sensors = {
+        sid: SensorEntry(
+            world_T_camera=tuple(tuple(float(v) for v in row) for row in pose),  # type: ignore[arg-type]
+            intrinsics=recording.sensors[sid].intrinsics,
+            model=recording.sensors[sid].model,
+        )
+        for sid, pose in truth.items()
+    }
+    calibration = CalibrationFile(
+        sensors=sensors,
+        id=new_calibration_id(),
+        created=now_iso(),
+        world="floor",
+        quality={"perturbation_m": translation, "perturbation_deg": rotation},
+        notes=f"true poses of recording {recording.path}"
+        + (f", each moved {translation} m and turned {rotation} deg" if args.perturb else ""),
+    )
+    backup = save_calibration(args.out, calibration)
+    if args.json:
+        _emit(
+            {
+                "out": str(args.out),
+                "backup": str(backup) if backup else None,
+                "sensors": sorted(sensors),
+            }
+        )
+    else:
+        _info(f"wrote {args.out}: the true poses of {len(sensors)} sensors ({calibration.notes})")
     return 0
 
 

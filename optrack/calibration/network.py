@@ -44,7 +44,7 @@ import numpy as np
 
 from optrack.calibration.board import Checkerboard
 from optrack.errors import UserError
-from optrack.geometry import invert, make_pose, rotation_angle_deg
+from optrack.geometry import invert, make_pose
 from optrack.params import Param, Params, Schema, register
 from optrack.types import Intrinsics
 
@@ -470,6 +470,7 @@ class SensorStatus:
 
     views: int = 0  # instants in which this sensor saw the board
     used_views: int = 0  # of those, the ones in the optimisation
+    rejected: int = 0  # views refused: the board's pose did not reproject (max_pnp_rms_px)
     rms_px: float | None = None  # reprojection RMS over its corners in the optimisation
     calibrated: bool = False
     parent: str | None = None
@@ -601,6 +602,8 @@ class NetworkCalibrator:
             view = observe_board(sid, found, self.intrinsics[sid], self.board)
             if view.rms_px <= self.params.max_pnp_rms_px:
                 views[sid] = view
+            else:
+                self.status[sid].rejected += 1
         if views and self._moved_enough(views):
             self._accept(views, floor)
         self.solve_ms = (time.perf_counter() - started) * 1000.0
@@ -852,15 +855,6 @@ class NetworkCalibrator:
             seconds=time.perf_counter() - started,
             anchor=self.floor_anchor,
         )
-
-
-def relative_pose_summary(a_T_b: np.ndarray) -> dict[str, object]:
-    """Baseline (m), rotation angle (deg) and translation of a relative pose."""
-    return {
-        "baseline_m": float(np.linalg.norm(a_T_b[:3, 3])),
-        "rotation_deg": rotation_angle_deg(a_T_b),
-        "translation": [float(v) for v in a_T_b[:3, 3]],
-    }
 
 
 def iter_pairs(names: Iterable[str]) -> Iterable[tuple[str, str]]:

@@ -24,6 +24,7 @@ from optrack.params import Params
 from optrack.recording import SensorInfo
 from optrack.runtime.calibration_store import CalibrationStore
 from optrack.runtime.config import NodeConfig, load_node_config, state_dir
+from optrack.runtime.node import PARENT_ENV
 from optrack.sensors.base import Sensor, SensorError
 
 __all__ = [
@@ -65,6 +66,18 @@ def stop_on_signals(stop: Callable[[], None]) -> Iterator[None]:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+def finish(code: int) -> int:
+    """Return ``code``; a node started by ``optrack run`` exits at once instead (everything
+    is closed by then, and the interpreter's teardown of Open3D and friends takes seconds
+    that would only slow the site's stop)."""
+    if os.environ.get(PARENT_ENV):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        logging.shutdown()
+        os._exit(code)
+    return code
 
 
 def _nice(params: Params) -> None:
@@ -168,10 +181,11 @@ def cmd_node_detect(args: argparse.Namespace) -> int:
             "publishing %s on optrack/%s/detections/%s", sensor.info.uri or name, args.site, name
         )
         with stop_on_signals(node.stop):
-            return node.run()
+            code = node.run()
     finally:
         sensor.close()
         bus.close()
+    return finish(code)
 
 
 def cmd_node_track(args: argparse.Namespace) -> int:
@@ -209,13 +223,14 @@ def cmd_node_track(args: argparse.Namespace) -> int:
         with stop_on_signals(tracker.stop):
             if outputs is not None:
                 outputs.start_status()
-            return tracker.run()
+            code = tracker.run()
     finally:
         if outputs is not None:
             outputs.close()
         if tracker is not None:
             tracker.close()
         bus.close()
+    return finish(code)
 
 
 def run_outputs_node(args: argparse.Namespace) -> int:
@@ -231,14 +246,15 @@ def run_outputs_node(args: argparse.Namespace) -> int:
     try:
         node = OutputsNode(bus, config["node"], config["outputs"])
         with stop_on_signals(node.stop):
-            return node.run()
+            code = node.run()
     except UserError as error:
         logging.getLogger("optrack.runtime").error("%s", error)
-        return 1
+        code = 1
     finally:
         if node is not None:
             node.close()
         bus.close()
+    return finish(code)
 
 
 def cmd_run(args: argparse.Namespace) -> int:

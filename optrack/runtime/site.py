@@ -12,9 +12,9 @@ a live camera.
 It supervises the children: one that stops unexpectedly is reported (on
 stderr and in the ``site`` status on the bus) and restarted after
 ``site.restart_delay_s`` (longer when it keeps failing at start); a
-detector whose recording ended is not. Ctrl-C (or ``--seconds``) stops
-the detectors, then the tracker, then the outputs, each with SIGTERM, and
-kills what has not ended after ``site.stop_timeout_s``.
+detector whose recording ended is not. Ctrl-C (or ``--seconds``) sends every
+node SIGTERM (each stops its loop, closes its bus and exits) and kills what
+has not ended after ``site.stop_timeout_s``.
 """
 
 from __future__ import annotations
@@ -415,35 +415,31 @@ class Site:
         self._stop.set()
 
     def stop(self) -> None:
-        """Stop the children in order (detectors, tracker, outputs), then the hub."""
+        """Stop every child (SIGTERM, then SIGKILL after ``site.stop_timeout_s``), then the
+        hub."""
         self._stop.set()
         timeout = float(self.params.stop_timeout_s)
         started = time.monotonic()
         killed = 0
-        for roles in (("gui", "detector"), ("tracker",), ("outputs",)):
-            group = [
-                c
-                for c in self.children
-                if c.role in roles and c.process is not None and c.process.poll() is None
-            ]
-            for child in group:
-                try:
-                    child.process.send_signal(signal.SIGTERM)  # type: ignore[union-attr]
-                except ProcessLookupError:
-                    pass
-            deadline = time.monotonic() + timeout
-            for child in group:
-                assert child.process is not None
-                try:
-                    child.process.wait(max(0.0, deadline - time.monotonic()))
-                except subprocess.TimeoutExpired:
-                    log.warning("%s did not stop within %.1f s; killing it.", child.label, timeout)
-                    child.process.kill()
-                    child.process.wait()
-                    killed += 1
-                child.state = "stopped"
+        # All at once: each node stops its loop, closes its bus and exits by itself.
+        running = [c for c in self.children if c.process is not None and c.process.poll() is None]
+        for child in running:
+            try:
+                child.process.send_signal(signal.SIGTERM)  # type: ignore[union-attr]
+            except ProcessLookupError:
+                pass
+        deadline = time.monotonic() + timeout
+        for child in running:
+            assert child.process is not None
+            try:
+                child.process.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                log.warning("%s did not stop within %.1f s; killing it.", child.label, timeout)
+                child.process.kill()
+                child.process.wait()
+                killed += 1
         for child in self.children:
-            if child.state == "waiting":
+            if child.state in ("running", "waiting"):
                 child.state = "stopped"
         standby, self._standby = self._standby, None
         if standby is not None:

@@ -14,10 +14,10 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import enum
+from typing import Any
 
 import numpy as np
 
-from optrack.params import Params
 from optrack.types import TrackStatus
 
 __all__ = [
@@ -69,7 +69,7 @@ class TrackState:
 
 
 def on_detected(
-    track: TrackState, t: float, confidence: float, height: float, sensor: str, params: Params
+    track: TrackState, t: float, confidence: float, height: float, sensor: str, params: Any
 ) -> None:
     """A detection (stamped t, possibly late) was associated to the track."""
     track.detections += 1
@@ -94,7 +94,7 @@ def on_detected(
         )
 
 
-def advance(track: TrackState, now: float, params: Params) -> Fate:
+def advance(track: TrackState, now: float, params: Any) -> Fate:
     """Update the status with the time ``now``; say whether the track lives on.
 
     A track found again after it went missing is seen (and kept alive) only

@@ -91,10 +91,14 @@ class ConstantVelocityUKF:
         return sigmas
 
     def _moments(self, sigmas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        mean = np.einsum("k,nkj->nj", self.Wm, sigmas)
+        """Unscented transform: weighted mean and covariance of sigma points (N, k, 4)."""
+        mean = self.Wm @ sigmas
         d = sigmas - mean[:, None, :]
-        cov = np.einsum("k,nki,nkj->nij", self.Wc, d, d)
-        return mean, cov
+        return mean, self._cross(d, d)
+
+    def _cross(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """sum_k Wc[k] a[:, k]^T b[:, k], (N, 4, 4)."""
+        return np.swapaxes(a * self.Wc[None, :, None], 1, 2) @ b
 
     # ------------------------------------------------------------------- steps
     def predict(
@@ -118,8 +122,7 @@ class ConstantVelocityUKF:
         zp, S0 = self._moments(sigmas_h)
         dx = sigmas_f - x_prior[:, None, :]
         dz = sigmas_h - zp[:, None, :]
-        Pxz = np.einsum("k,nki,nkj->nij", self.Wc, dx, dz)
-        return zp, S0, Pxz
+        return zp, S0, self._cross(dx, dz)
 
     @staticmethod
     def update(

@@ -26,6 +26,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
+import types
 
 import numpy as np
 
@@ -110,8 +111,10 @@ class Tracker:
 
     # ---------------------------------------------------------------- settings
     def _refresh(self) -> None:
-        """Recompute what derives from parameters (they can change live)."""
-        p = self.params
+        """Recompute what derives from parameters (they can change live); ``self.p`` is a
+        plain snapshot of them for the hot loops."""
+        self.p = types.SimpleNamespace(**self.params.as_dict())
+        p = self.p
         key = (
             p.gate_probability,
             p.acceleration_variance,
@@ -141,7 +144,7 @@ class Tracker:
         newest stamp seen, which makes replays deterministic).
         """
         self._refresh()
-        p = self.params
+        p = self.p
         t = float(batch.stamp)
         if not math.isfinite(t):
             raise TrackingError(
@@ -181,7 +184,7 @@ class Tracker:
             else None
         )
 
-        self._advance(self.clock)  # tracks whose time is up take no more detections
+        self._advance(self.clock)  # statuses at this time; tracks whose time is up go
         taken = np.zeros(m, dtype=bool)
         if self.tracks and m:
             taken = self._associate(
@@ -190,7 +193,6 @@ class Tracker:
         self._start_tracks(t, batch.sensor_id, detections, positions, position_var, features, taken)
         if appearance and features is not None:
             self._recover_identities(t)
-        self._advance(self.clock)
         return self.output(self.clock)
 
     def _associate(
@@ -204,7 +206,7 @@ class Tracker:
         features: np.ndarray | None,
     ) -> np.ndarray:
         """Steps 1-3 and the updates; returns which detections were taken."""
-        p = self.params
+        p = self.p
         tracks = self.tracks
         n, m = len(tracks), len(detections)
         X = np.array([tr.x for tr in tracks])
@@ -284,9 +286,9 @@ class Tracker:
     ) -> None:
         track.x, track.P, track.t = x, P, state_time
         record_position(
-            track, t, self.params.max_detection_delay + 2 * self.params.velocity_baseline
+            track, t, self.p.max_detection_delay + 2 * self.p.velocity_baseline
         )
-        on_detected(track, t, detection.confidence, detection.height, sensor, self.params)
+        on_detected(track, t, detection.confidence, detection.height, sensor, self.p)
 
     # -------------------------------------------------------------- appearance
     def _missing_candidates(self, t: float, skip: set[int]) -> list[int]:
@@ -303,7 +305,7 @@ class Tracker:
         ]
 
     def _reach(self, lost_for: np.ndarray) -> np.ndarray:
-        return reach(lost_for, self.params.max_speed, self.params.min_reach)
+        return reach(lost_for, self.p.max_speed, self.p.min_reach)
 
     def _appearance_step(
         self,
@@ -348,7 +350,7 @@ class Tracker:
             if other is track or other.born <= lost_since:
                 continue
             ox, oy = _last_seen(other)
-            if math.hypot(ox - position[0], oy - position[1]) > self.params.min_reach:
+            if math.hypot(ox - position[0], oy - position[1]) > self.p.min_reach:
                 continue
             if other.features:
                 score = np.mean(self.appearance.confidence(track.id, np.array(other.features)))
@@ -438,7 +440,7 @@ class Tracker:
         self, position: np.ndarray, position_var: float
     ) -> tuple[np.ndarray, np.ndarray]:
         x = np.array([position[0], position[1], 0.0, 0.0])
-        v = self.params.initial_velocity_variance
+        v = self.p.initial_velocity_variance
         return x, np.diag([position_var, position_var, v, v])
 
     def _start_tracks(
@@ -451,7 +453,7 @@ class Tracker:
         features: np.ndarray | None,
         taken: np.ndarray,
     ) -> None:
-        p = self.params
+        p = self.p
         for j, d in enumerate(detections):
             if taken[j] or d.confidence < p.min_confidence_initialization:
                 continue
@@ -476,7 +478,7 @@ class Tracker:
     def _advance(self, now: float) -> None:
         kept = []
         for track in self.tracks:
-            fate = advance(track, now, self.params)
+            fate = advance(track, now, self.p)
             if fate is Fate.KEEP:
                 kept.append(track)
             elif fate is Fate.OLD:
@@ -491,7 +493,7 @@ class Tracker:
         """Validated tracks, positions carried to time t (default: the newest stamp)."""
         t = self.clock if t is None else t
         self.seq += 1
-        missing = self.params.sec_before_missing
+        missing = self.p.sec_before_missing
         tracks = []
         for tr in self.tracks:
             if not tr.validated:

@@ -188,6 +188,7 @@ def test_a_wrongly_detected_board_cannot_pull_the_solution(session):
     result = calibrator.solve()
     errors = calibration_errors(result.world_T_camera, session.world_T_camera)
     assert errors.max_position_error_m < 0.006 and errors.max_rotation_error_deg < 0.12
+    assert sum(status.rejected for status in result.sensors.values()) == 1  # the scrambled one
 
 
 def test_cameras_held_at_known_poses_do_not_move_and_the_floor_is_still_found(session):
