@@ -21,71 +21,6 @@ from collections.abc import Sequence
 from app.display import HEADLESS_HINT, display_problem
 
 PARENT_ENV = "OPTRACK_PARENT_PID"  # set by 'optrack run' in the processes it starts
-_reserved = False
-
-
-def leaked_singletons() -> list[str]:
-    """Which of ``True`` and ``None`` PySide6 takes references from (names).
-
-    PySide6 6.12.0 returns a borrowed ``True`` from ``SignalInstance.emit()``
-    and drops a reference of ``None`` each time C++ calls a Python override
-    that returns ``None`` (a model's ``data()``, every ``paint()`` of
-    pyqtgraph). With a live site that is thousands a second, and on CPython
-    3.11, where these objects are not immortal, the interpreter aborts
-    ("bool_dealloc", "none_dealloc") when one reaches zero.
-    """
-    from PySide6.QtCore import (
-        QAbstractListModel,
-        QModelIndex,
-        QObject,
-        QSortFilterProxyModel,
-        Signal,
-    )
-
-    class Probe(QObject):
-        ping = Signal()
-
-    class Nothing(QAbstractListModel):
-        def rowCount(self, parent: QModelIndex = QModelIndex()) -> int:  # noqa: N802, B008
-            return 1
-
-        def data(self, index: QModelIndex, role: int = 0) -> None:
-            return None
-
-    leaked = []
-    probe = Probe()
-    before = sys.getrefcount(True)
-    for _ in range(10):
-        probe.ping.emit()
-    if sys.getrefcount(True) < before:
-        leaked.append("True")
-    model, proxy = Nothing(), QSortFilterProxyModel()
-    proxy.setSourceModel(model)
-    index = proxy.index(0, 0)
-    before = sys.getrefcount(None)
-    for _ in range(10):
-        proxy.data(index, 0)
-    if sys.getrefcount(None) < before - 5:  # other threads may take a few meanwhile
-        leaked.append("None")
-    return leaked
-
-
-def reserve_singleton_references() -> list[str]:
-    """Work around :func:`leaked_singletons`: give ``True``, ``False`` and ``None`` 2**40
-    spare references each, as immortal as CPython 3.12 makes them, so that the leak can
-    never reach zero (at 10 000 a second that takes three years). Nothing on CPython 3.12+
-    or with a PySide6 that does not leak. Returns what leaked."""
-    global _reserved
-    if sys.version_info >= (3, 12) or _reserved:
-        return []
-    leaked = leaked_singletons()
-    if leaked:
-        import ctypes
-
-        for singleton in (True, False, None):
-            ctypes.c_ssize_t.from_address(id(singleton)).value += 1 << 40
-        _reserved = True
-    return leaked
 
 
 def configure_qt() -> None:
@@ -93,11 +28,10 @@ def configure_qt() -> None:
 
     All OpenGL views share one context group: pyqtgraph compiles each shader
     once per process, so a second 3D view (or a view re-created) must be able
-    to use the first one's programs. And see :func:`reserve_singleton_references`.
+    to use the first one's programs.
     """
     from PySide6.QtCore import QCoreApplication, Qt
 
-    reserve_singleton_references()
     QCoreApplication.setAttribute(Qt.ApplicationAttribute.AA_ShareOpenGLContexts)
 
 

@@ -371,8 +371,6 @@ def _world_from_points(
     """
     import open3d as o3d
 
-    from optrack.geometry import backproject_points  # noqa: F401 - documents the convention
-
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except FileNotFoundError:

@@ -67,6 +67,7 @@ def node_setup(venue, hub, make_client, tmp_path):
             factory=factory,
         )
         made.append(node)
+        time.sleep(0.3)  # let the node's subscriptions reach the hub
         return node
 
     yield make
