@@ -3,12 +3,13 @@
 One :class:`PeopleDetector` per sensor composes the stages (Munaro et al.
 2012 section 3; OpenPTrack, Munaro et al. 2016 section 4.2)::
 
-    depth -> valid, in range, subsampled points -> [denoise] -> voxel grid
-          -> ground plane (initialise once, refit per frame unless locked)
-          -> floor removal -> [background subtraction]
-          -> ground frame -> Euclidean clusters -> head-based sub-clusters
-          -> height / width limits -> HOG confidence (colour, infrared, or the
-             depth silhouette when dark) -> DetectionBatch
+    depth -> valid, in range, subsampled points -> [denoise]
+          -> ground plane (initialised once from the voxelised cloud)
+          -> floor removal, floor refit (unless locked) -> voxel grid
+          -> [background subtraction] -> ground frame -> Euclidean clusters
+          -> head-based sub-clusters -> height / width / head checks
+          -> HOG confidence (colour, infrared, or the depth silhouette when
+             dark) -> DetectionBatch
 
 Positions are in the world frame when the sensor's ``world_T_camera`` is
 known (``frame_id = "world"``), else in the sensor's ground frame
@@ -36,7 +37,13 @@ from optrack.detection.classifier import (
     window_footprint,
 )
 from optrack.detection.clustering import Candidate, person_candidates
-from optrack.detection.ground import GroundEstimator, GroundStore, check_ground, ground_T_camera
+from optrack.detection.ground import (
+    GroundEstimator,
+    GroundStore,
+    check_ground,
+    ground_from_calibration,
+    ground_T_camera,
+)
 from optrack.detection.params import detection_params
 from optrack.detection.preprocessing import OrganisedCloud, denoise, select_points, voxel_grid
 from optrack.geometry import Plane, invert, project, transform_points
@@ -101,8 +108,6 @@ class PeopleDetector:
         )
         calibration = None
         if self.world_T_camera is not None:
-            from optrack.detection.ground import ground_from_calibration
-
             calibration = ground_from_calibration(self.world_T_camera)
         self.ground = GroundEstimator(
             self.params,

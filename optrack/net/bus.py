@@ -11,9 +11,11 @@ callback that raises is counted and logged the same way.
 
 from __future__ import annotations
 
+import atexit
 import logging
 import threading
 import time
+import weakref
 from collections import Counter
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -30,6 +32,22 @@ __all__ = ["Bus", "BusError", "MessageStats"]
 log = logging.getLogger("optrack.net")
 
 M = TypeVar("M", bound=Message)
+
+
+_open_buses: weakref.WeakSet[Bus] = weakref.WeakSet()
+
+
+def _close_open_buses() -> None:
+    """Close the buses a program left open. Zenoh runs Python callbacks on non-daemon
+    threads that end only when their subscription does, and the interpreter joins those
+    threads before ``atexit`` handlers run; so this hooks where ``concurrent.futures``
+    does, just before that join (and ``atexit`` where that hook does not exist)."""
+    for bus in list(_open_buses):
+        bus.close()
+
+
+_register = getattr(threading, "_register_atexit", atexit.register)
+_register(_close_open_buses)
 
 
 class BusError(UserError):
@@ -153,6 +171,7 @@ class Bus:
         self._declared: list[Any] = []
         self.session = _open_session(zenoh_config(self.params, host=host), self.params, host)
         self._closed = False
+        _open_buses.add(self)
 
     # ----------------------------------------------------------- publishing
     def publish(self, key: str, message: Message, *, realtime: bool = True) -> None:

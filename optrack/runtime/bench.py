@@ -6,7 +6,10 @@ detector node processes; the tracker node and the outputs node run as in
 ``optrack run``; a UDP socket in this process receives the OpenPTrack JSON.
 For every tracks datagram after a warm-up, the latency is its arrival time
 minus its header stamp, which is the capture instant of the newest frame
-that went into it (all clocks are this computer's). CPU use is read from
+that went into it (all clocks are this computer's). The nodes' own medians
+split it: ``detector_latency_ms`` (capture to detections published),
+``tracker_latency_ms`` (capture to tracks published), ``outputs_latency_ms``
+(capture to datagram sent). CPU use is read from
 ``/proc`` for the launcher and every node process over the measured window
 (100 % is one core). Nothing is simulated faster or slower than real time:
 when the computer cannot keep up, the detectors skip frames, and ``hz``,
@@ -181,6 +184,8 @@ def bench_e2e(args: argparse.Namespace) -> int:
         "hz": statistics.median(fps),
         "detector_hz": detector_hz,
         "detector_latency_ms": detector_ms,
+        "tracker_latency_ms": statuses["tracker"].latency_ms if "tracker" in statuses else None,
+        "outputs_latency_ms": statuses["outputs"].latency_ms if "outputs" in statuses else None,
         "dropped_frames": dropped,
         "output_hz": frames / elapsed,
         "heartbeat_hz": beats / elapsed,

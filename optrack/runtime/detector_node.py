@@ -296,6 +296,10 @@ class DetectorNode(Node):
                     self.state = "ended"
                     self.log.info("the sensor has no more frames after %d; stopping.", self.frames)
                     break
+        except UserError as error:  # the sensor failed (unplugged...): say so, then exit
+            self.state = "error"
+            self.last_error = str(error)
+            raise
         finally:
             self.close()
         return 0

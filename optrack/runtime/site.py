@@ -252,7 +252,7 @@ class Site:
             stdout=sys.stderr.fileno(),
             stderr=sys.stderr.fileno(),
             env=env,
-            start_new_session=True,  # Ctrl-C reaches the launcher, which stops them in order
+            start_new_session=True,  # Ctrl-C reaches the launcher only; it stops the nodes
         )
 
     def _spawn_standby(self) -> None:

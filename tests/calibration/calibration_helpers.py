@@ -114,7 +114,7 @@ def write_board_recording(
     placements: list[tuple[np.ndarray, bool]],
     cameras: dict[str, np.ndarray] | None = None,
     intrinsics: Intrinsics | None = None,
-    hold_frames: int = 2,
+    hold_frames: int = 4,
     fps: float = 4.0,
 ) -> dict[str, np.ndarray]:
     """A recording: every placement held still for ``hold_frames`` frames, every sensor

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 
 import numpy as np
@@ -19,10 +21,9 @@ from optrack.calibration.board import Checkerboard, find_corners
 from optrack.calibration.files import load_calibration
 from optrack.calibration.network import NETWORK_PARAMS, observe_board
 from optrack.calibration.quality import calibration_errors
-from optrack.calibration.session import SESSION_PARAMS, board_on_floor, calibrate_recording
+from optrack.calibration.session import SESSION_PARAMS, board_on_floor
 from optrack.cli import main
 from optrack.geometry import invert, rotation_angle_deg
-from optrack.recording import Recording
 from optrack.types import Intrinsics
 
 BOARD = Checkerboard(6, 5, 0.12)
@@ -52,17 +53,28 @@ def board_recording(tmp_path_factory):
     return out, cameras
 
 
-def test_a_recorded_board_session_calibrates_every_sensor_and_the_floor(board_recording):
-    path, truth = board_recording
-    result = calibrate_recording(Recording(path), BOARD)
-    network = result.network
-    assert network.world == "floor" and network.uncalibrated == []
-    assert result.floor_instants == 2
-    assert set(result.image.values()) == {"infrared"}
-    errors = calibration_errors(network.world_T_camera, truth)
-    assert errors.max_position_error_m < 0.01
-    assert errors.max_rotation_error_deg < 0.15
-    assert errors.ground_error_deg < 0.2 and errors.ground_error_m < 0.005
+@pytest.fixture(scope="module")
+def network_run(board_recording, tmp_path_factory):
+    """``optrack calibrate network REC --out FILE --json``: (stdout, stderr, file)."""
+    path, _ = board_recording
+    out = tmp_path_factory.mktemp("network") / "network.yaml"
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        code = main(["calibrate", "network", str(path), "--out", str(out), "--json"])
+    assert code == 0, stderr.getvalue()
+    return stdout.getvalue(), stderr.getvalue(), out
+
+
+def test_a_recorded_board_session_calibrates_every_sensor_and_the_floor(network_run):
+    stdout, _, _ = network_run
+    payload = json.loads(stdout)
+    assert payload["world"] == "floor" and payload["uncalibrated"] == []
+    assert payload["floor_views"] == 2
+    assert payload["floor_views_wrong"] == 0 and payload["floor_views_missed"] == 0
+    assert {s["image"] for s in payload["sensors"].values()} == {"infrared"}
+    assert payload["max_position_error_m"] < 0.01
+    assert payload["max_rotation_error_deg"] < 0.15
+    assert payload["ground_error_deg"] < 0.2 and payload["ground_error_m"] < 0.005
 
 
 def test_a_board_held_up_is_not_taken_for_the_floor_but_one_lying_on_it_is():
@@ -84,20 +96,12 @@ def test_a_board_held_up_is_not_taken_for_the_floor_but_one_lying_on_it_is():
     assert answers == [False, False, True]
 
 
-def test_network_cli_writes_the_file_and_reports_errors_against_the_truth(
-    board_recording, tmp_path, capsys
-):
-    path, _ = board_recording
-    out = tmp_path / "network.yaml"
-    assert main(["calibrate", "network", str(path), "--out", str(out), "--json"]) == 0
-    captured = capsys.readouterr()
-    payload = json.loads(captured.out)  # exactly one JSON object on stdout
-    assert "board seen by" in captured.err  # progress on stderr
+def test_network_cli_writes_the_file_and_prints_one_json_object(network_run):
+    stdout, stderr, out = network_run
+    payload = json.loads(stdout)  # exactly one JSON object on stdout
+    assert stdout.count("\n") == 1
+    assert "board seen by" in stderr  # progress on stderr
     assert set(payload["sensors"]) == {"a", "b", "c"}
-    assert payload["max_position_error_m"] < 0.01
-    assert payload["max_rotation_error_deg"] < 0.15
-    assert payload["ground_error_deg"] < 0.2
-    assert payload["world"] == "floor" and payload["floor_views"] == 2
     calibration = load_calibration(out)
     assert calibration.board.cols == 6 and calibration.sensors["a"].image == "infrared"
     np.testing.assert_allclose(calibration.pose("b"), payload["sensors"]["b"]["world_T_camera"])
@@ -239,3 +243,18 @@ def test_points_on_one_line_are_refused(board_recording, tmp_path, capsys):
     )
     assert code == 1
     assert "one line" in capsys.readouterr().err
+
+
+def test_truth_cli_writes_the_true_poses_perturbed_by_exactly_what_was_asked(
+    board_recording, tmp_path, capsys
+):
+    path, truth = board_recording
+    out = tmp_path / "perturbed.yaml"
+    assert main(["calibrate", "truth", str(path), "--out", str(out), "--perturb", "0.1,2"]) == 0
+    perturbed = load_calibration(out)
+    for sid, pose in truth.items():
+        moved = perturbed.pose(sid)
+        assert np.linalg.norm(moved[:3, 3] - pose[:3, 3]) == pytest.approx(0.1)
+        assert rotation_angle_deg(moved, pose) == pytest.approx(2.0)
+    assert main(["calibrate", "truth", str(path), "--out", str(out), "--perturb", "ten"]) == 1
+    assert "METRES,DEGREES" in capsys.readouterr().err

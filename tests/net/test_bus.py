@@ -169,3 +169,22 @@ def test_closed_bus_drops_publications_quietly(hub):
     hub.close()
     hub.publish(hub.keys.detections("cam0"), batch())
     assert hub.closed
+
+
+def test_a_program_that_forgets_to_close_its_buses_still_exits(bus_params):
+    import subprocess
+    import sys
+
+    port = int(bus_params.local_port)
+    script = f"""
+from optrack.net.bus import Bus
+from optrack.net.config import BUS_PARAMS
+from optrack.net.messages import DetectionsMessage
+params = BUS_PARAMS.create({{"local_port": {port}}})
+hub = Bus("test", "hub", params, host=True)
+node = Bus("test", "node", params)
+for bus in (hub, node):
+    bus.subscribe(bus.keys.detections(), DetectionsMessage, lambda m, k: None)
+"""
+    result = subprocess.run([sys.executable, "-c", script], timeout=60, capture_output=True)
+    assert result.returncode == 0, result.stderr.decode()

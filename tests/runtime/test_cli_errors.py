@@ -27,7 +27,7 @@ def run(capsys, *argv: str) -> tuple[int, str]:
     ("uri", "sentence"),
     [
         ("bogus://x", "unknown scheme 'bogus'"),
-        ("file://{venue}#kinect2_0?realtime=false", "plays recordings in real time"),
+        ("file://{venue}?realtime=false#kinect2_0", "plays recordings in real time"),
         ("file://{venue}?fast=yes#kinect2_0", "sets 'fast'"),
         ("file://{venue}", "name one"),
         ("file:///no/such/recording#a", "does not exist"),
