@@ -27,7 +27,7 @@ from optrack.cli import emit_json, info
 from optrack.errors import UserError
 from optrack.evaluation.clear_mot import ClearMot, MotScore
 from optrack.evaluation.replay import replay
-from optrack.params import REGISTRY, Param, Params, ParamError, Schema, register
+from optrack.params import REGISTRY, Param, ParamError, Params, Schema, register
 from optrack.recording import GroundTruth, Recording
 from optrack.tracking import APPEARANCE_PARAMS, SMOOTHING_PARAMS, TRACKING_PARAMS, Tracker
 from optrack.tracking.smoothing import OutputSmoother
@@ -81,7 +81,9 @@ class Truth:
         for instant in instants:
             times.append(instant.t)
             ids.append(np.array([p.id for p in instant.people], dtype=np.int64))
-            xy.append(np.array([(p.x, p.y) for p in instant.people], dtype=np.float64).reshape(-1, 2))
+            xy.append(
+                np.array([(p.x, p.y) for p in instant.people], dtype=np.float64).reshape(-1, 2)
+            )
             visible.append(
                 {
                     s: np.array([p.visible.get(s, 0.0) for p in instant.people], dtype=np.float64)
@@ -107,7 +109,9 @@ def _config(path: str | None) -> dict[str, Mapping[str, Any]]:
     except FileNotFoundError:
         raise EvalError(f"config file {file} does not exist; check the path.") from None
     except (OSError, yaml.YAMLError):
-        raise EvalError(f"config file {file} cannot be read as YAML; fix it or leave it out.") from None
+        raise EvalError(
+            f"config file {file} cannot be read as YAML; fix it or leave it out."
+        ) from None
     if data is None:
         return {}
     if not isinstance(data, dict) or not all(isinstance(v, dict | None) for v in data.values()):
@@ -194,20 +198,18 @@ def _poses(recording: Recording, calibration: str | None) -> dict[str, np.ndarra
         network = load_network(calibration)
         return {sid: network.pose(sid) for sid in recording.sensor_ids}
     poses = {}
-    for sid, info in recording.sensors.items():
-        if info.world_T_camera is None:
+    for sid, sensor in recording.sensors.items():
+        if sensor.world_T_camera is None:
             raise EvalError(
                 f"recording {recording.path} does not know where sensor '{sid}' is; give "
                 "--calibration FILE (from 'optrack calibrate network')."
             )
-        poses[sid] = np.asarray(info.world_T_camera, dtype=np.float64)
+        poses[sid] = np.asarray(sensor.world_T_camera, dtype=np.float64)
     return poses
 
 
 def _rounded(score: MotScore) -> dict[str, Any]:
-    return {
-        k: (round(v, 4) if isinstance(v, float) else v) for k, v in score.as_dict().items()
-    }
+    return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in score.as_dict().items()}
 
 
 def cmd_eval(args: argparse.Namespace) -> int:

@@ -67,8 +67,12 @@ def _info(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
-def _from_synthetic(name: str, batches: list[DetectionBatch], truth: SceneTruth, sensors: int) -> BenchStream:
-    return BenchStream(name, "synthetic", sensors, batches, truth.times, truth.ids, truth.xy, truth.visible)
+def _from_synthetic(
+    name: str, batches: list[DetectionBatch], truth: SceneTruth, sensors: int
+) -> BenchStream:
+    return BenchStream(
+        name, "synthetic", sensors, batches, truth.times, truth.ids, truth.xy, truth.visible
+    )
 
 
 def _score(stream: BenchStream, outputs: Sequence[Sequence[tuple[int, float, float]]]) -> MotScore:
@@ -195,8 +199,11 @@ def _sim_stream(scenario: str, sensors: int, seconds: float, seed: int) -> Bench
 
 def _synthetic_streams(seed: int) -> list[BenchStream]:
     out = []
-    for name, people, sensors in (("synthetic-crowd", 7, 3), ("synthetic-one-sensor", 7, 1),
-                                  ("synthetic-dense", 15, 4)):
+    for name, people, sensors in (
+        ("synthetic-crowd", 7, 3),
+        ("synthetic-one-sensor", 7, 1),
+        ("synthetic-dense", 15, 4),
+    ):
         scene = crowd_scene(people, sensors, 60.0, seed=seed)
         batches, truth = render(scene, seed=seed)
         out.append(_from_synthetic(name, batches, truth, sensors))
@@ -254,8 +261,10 @@ def _compare(
             }
             entry["better_than_norfair"] = ours.mota > theirs.mota and ours.idsw < theirs.idsw
         out[stream.name] = entry
-        _info(f"bench tracking: {stream.name}: ours MOTA {ours.mota:.3f} / {ours.idsw} switches"
-              + (f"; norfair MOTA {theirs.mota:.3f} / {theirs.idsw}" if norfair_ok else ""))
+        _info(
+            f"bench tracking: {stream.name}: ours MOTA {ours.mota:.3f} / {ours.idsw} switches"
+            + (f"; norfair MOTA {theirs.mota:.3f} / {theirs.idsw}" if norfair_ok else "")
+        )
     return out
 
 
@@ -291,5 +300,3 @@ def cmd_bench_tracking(args: argparse.Namespace) -> int:
     else:
         _info(f"median update with 20 people and 10 sensors: {result['ms_per_update_20x10']} ms")
     return 0
-
-

@@ -285,9 +285,7 @@ class Tracker:
         detection: Detection,
     ) -> None:
         track.x, track.P, track.t = x, P, state_time
-        record_position(
-            track, t, self.p.max_detection_delay + 2 * self.p.velocity_baseline
-        )
+        record_position(track, t, self.p.max_detection_delay + 2 * self.p.velocity_baseline)
         on_detected(track, t, detection.confidence, detection.height, sensor, self.p)
 
     # -------------------------------------------------------------- appearance

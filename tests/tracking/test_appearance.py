@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from optrack.evaluation.synthetic import person_histogram, render
+from optrack.evaluation.synthetic import render
 from optrack.tracking import APPEARANCE_PARAMS
 from optrack.tracking.appearance import (
     AppearanceModel,
