@@ -5,8 +5,12 @@ trajectories coincide. Algorithm 1, as here:
 
 1. Each sensor's detections become a cloud in x-y-time: (x, y, s * t), with
    ``time_scale`` s in metres per second (time warped into a length).
-2. The average trajectory: detections are binned in time (``time_bin``) and
-   every bin seen by at least ``min_sensors`` sensors gives one mean point.
+2. The average trajectory, sampled every ``average_step`` seconds: at each
+   sample time every sensor's trajectory is interpolated linearly (across
+   gaps up to ``max_gap``) and the mean taken where ``min_sensors`` sensors
+   have a position. (OpenPTrack averages 0.25 s time bins; interpolating keeps
+   a walking person's positions of the same instant together, where bins mix
+   positions up to a bin apart: 10-25 cm at walking speed.)
 3. Each sensor's cloud is registered to the average with Open3D's ICP in
    x-y-time, in ``rounds`` rounds whose maximum correspondence distance
    halves from ``max_correspondence`` (2.0 -> 1.0 -> 0.5 -> 0.25 m, as
@@ -24,8 +28,9 @@ in x-y-time and applies that matrix in x-y-z; here the transform is always
 estimated in x-y-z from the x-y-time correspondences.)
 
 The alignment error (the paper's Figure 19) is the mean ground-plane
-distance between two sensors' detections of the person at the same time,
-each trajectory interpolated linearly in time.
+distance between two sensors' detections of the person at the same time:
+every detection against every other sensor's trajectory interpolated to its
+time.
 """
 
 from __future__ import annotations
@@ -61,12 +66,20 @@ REFINEMENT_PARAMS = register(
                 help="Metres of the warped time axis per second (OpenPTrack: 1).",
             ),
             Param(
-                "time_bin",
-                0.25,
-                min=0.01,
-                max=5.0,
+                "average_step",
+                0.05,
+                min=0.005,
+                max=1.0,
                 unit="s",
-                help="Detections of one time bin make one point of the average trajectory.",
+                help="Sampling step of the average trajectory.",
+            ),
+            Param(
+                "max_gap",
+                0.5,
+                min=0.01,
+                max=10.0,
+                unit="s",
+                help="A trajectory is interpolated only between detections this close in time.",
             ),
             Param(
                 "min_sensors",
@@ -74,7 +87,7 @@ REFINEMENT_PARAMS = register(
                 min=1,
                 max=64,
                 step=1,
-                help="A time bin enters the average when this many sensors saw the person in it.",
+                help="The average has a point where this many sensors saw the person.",
             ),
             Param(
                 "max_correspondence",
@@ -108,6 +121,14 @@ REFINEMENT_PARAMS = register(
                 max=100000,
                 step=1,
                 help="A sensor with fewer detections of the person is left as it is.",
+            ),
+            Param(
+                "dof",
+                "heading",
+                choices=("heading", "full"),
+                help="What a correction may change: heading (x, y, z and the turn about the "
+                "vertical; the camera's tilt stays the checkerboard's) or full (also the tilt, "
+                "from the trajectory's levelness: for a network whose tilts are wrong).",
             ),
             Param(
                 "keep_frame",
@@ -159,27 +180,40 @@ class RefinementResult:
     average_points: int
 
 
+def _interpolate(trajectory: Trajectory, t: np.ndarray, max_gap: float) -> np.ndarray:
+    """Positions at times ``t`` (Nx3; NaN outside the trajectory or across longer gaps)."""
+    out = np.full((len(t), 3), np.nan)
+    times = trajectory.t
+    if len(times) == 0:
+        return out
+    right = np.clip(np.searchsorted(times, t, side="left"), 0, len(times) - 1)
+    exact = times[right] == t
+    out[exact] = trajectory.xyz[right[exact]]
+    inner = ~exact & (t > times[0]) & (t < times[-1])
+    hi = right[inner]
+    lo = hi - 1
+    gap = times[hi] - times[lo]
+    w = ((t[inner] - times[lo]) / np.where(gap > 0, gap, 1.0))[:, None]
+    values = (1.0 - w) * trajectory.xyz[lo] + w * trajectory.xyz[hi]
+    values[gap > max_gap] = np.nan
+    out[inner] = values
+    return out
+
+
 def average_trajectory(
-    trajectories: Mapping[str, Trajectory], time_bin: float, min_sensors: int, t0: float
+    trajectories: Mapping[str, Trajectory], step: float, min_sensors: int, max_gap: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(times, Nx3 positions) of the average trajectory: one point per time bin seen by at
-    least ``min_sensors`` sensors (each sensor's detections in the bin averaged first, so
-    a faster sensor does not weigh more)."""
-    per_bin: dict[int, list[tuple[float, np.ndarray]]] = {}
-    for trajectory in trajectories.values():
-        bins = np.floor((trajectory.t - t0) / time_bin).astype(np.int64)
-        for b in np.unique(bins):
-            mask = bins == b
-            per_bin.setdefault(int(b), []).append(
-                (float(trajectory.t[mask].mean()), trajectory.xyz[mask].mean(axis=0))
-            )
-    times, points = [], []
-    for b in sorted(per_bin):
-        entries = per_bin[b]
-        if len(entries) >= min_sensors:
-            times.append(np.mean([e[0] for e in entries]))
-            points.append(np.mean([e[1] for e in entries], axis=0))
-    return np.asarray(times), np.asarray(points).reshape(-1, 3)
+    """(times, Nx3 positions) of the average trajectory: every ``step`` seconds, the mean
+    of the sensors' positions interpolated to that time, where ``min_sensors`` have one."""
+    start = min(float(tr.t.min()) for tr in trajectories.values() if len(tr.t))
+    stop = max(float(tr.t.max()) for tr in trajectories.values() if len(tr.t))
+    times = np.arange(start, stop + step / 2, step)
+    stacked = np.stack([_interpolate(tr, times, max_gap) for tr in trajectories.values()])
+    seen = np.all(np.isfinite(stacked), axis=2)
+    keep = seen.sum(axis=0) >= min_sensors
+    with np.errstate(invalid="ignore"):
+        mean = np.nanmean(stacked[:, keep], axis=0)
+    return times[keep], mean.reshape(-1, 3)
 
 
 def _xyt_cloud(xyz: np.ndarray, t: np.ndarray, scale: float, t0: float) -> o3d.geometry.PointCloud:
@@ -187,8 +221,27 @@ def _xyt_cloud(xyz: np.ndarray, t: np.ndarray, scale: float, t0: float) -> o3d.g
     return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
 
 
-def _xyz_transform(source: np.ndarray, target: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """Rigid x-y-z transform taking ``source[pairs[:,0]]`` onto ``target[pairs[:,1]]``."""
+def _heading_transform(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The rotation about the vertical and the x-y-z shift that best take ``source`` onto
+    ``target`` (paired Nx3 points): Kabsch in x-y for the heading, means for the shift."""
+    a, b = source[:, :2], target[:, :2]
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
+    rotation = vt.T @ np.diag([1.0, np.sign(np.linalg.det(vt.T @ u.T))]) @ u.T
+    out = np.eye(4)
+    out[:2, :2] = rotation
+    out[:2, 3] = cb - rotation @ ca
+    out[2, 3] = float(np.mean(target[:, 2] - source[:, 2]))
+    return out
+
+
+def _xyz_transform(
+    source: np.ndarray, target: np.ndarray, pairs: np.ndarray, dof: str = "full"
+) -> np.ndarray:
+    """Rigid x-y-z transform taking ``source[pairs[:,0]]`` onto ``target[pairs[:,1]]``: all six
+    degrees of freedom (Open3D's Kabsch), or ``dof="heading"``: x, y, z and the heading."""
+    if dof == "heading":
+        return _heading_transform(source[pairs[:, 0]], target[pairs[:, 1]])
     estimation = o3d.pipelines.registration.TransformationEstimationPointToPoint()
     return np.asarray(
         estimation.compute_transformation(
@@ -222,7 +275,7 @@ def _register(
     pairs = np.asarray(result.correspondence_set)
     if len(pairs) < 3:
         return None
-    return _xyz_transform(trajectory.xyz, target_xyz, pairs)
+    return _xyz_transform(trajectory.xyz, target_xyz, pairs, str(p.dof))
 
 
 def _keep_frame(
@@ -266,7 +319,7 @@ def refine_from_trajectories(
     average_t = np.zeros(0)
     for _ in range(int(p.rounds)):
         average_t, average_xyz = average_trajectory(
-            current, float(p.time_bin), int(p.min_sensors), t0
+            current, float(p.average_step), int(p.min_sensors), float(p.max_gap)
         )
         if len(average_t) < 3:
             raise RefinementError(
@@ -279,7 +332,9 @@ def refine_from_trajectories(
         current = {s: usable[s].transformed(corrections[s]) for s in usable}
         distance /= 2.0
     # Final: against the average on the level plane at the detections' median height.
-    average_t, average_xyz = average_trajectory(current, float(p.time_bin), int(p.min_sensors), t0)
+    average_t, average_xyz = average_trajectory(
+        current, float(p.average_step), int(p.min_sensors), float(p.max_gap)
+    )
     level = float(np.median(np.concatenate([tr.xyz[:, 2] for tr in current.values()])))
     projected = average_xyz.copy()
     projected[:, 2] = level
@@ -290,39 +345,35 @@ def refine_from_trajectories(
     if p.keep_frame:
         corrections = _keep_frame(usable, corrections)
     refined = {s: usable[s].transformed(corrections[s]) for s in usable}
-    bin_ = float(p.time_bin)
+    gap = float(p.max_gap)
     return RefinementResult(
         corrections=corrections,
-        error_before_m=alignment_error(usable, bin_),
-        error_after_m=alignment_error(refined, bin_),
-        error_before_xyz_m=alignment_error(usable, bin_, planar=False),
-        error_after_xyz_m=alignment_error(refined, bin_, planar=False),
+        error_before_m=alignment_error(usable, gap),
+        error_after_m=alignment_error(refined, gap),
+        error_before_xyz_m=alignment_error(usable, gap, planar=False),
+        error_after_xyz_m=alignment_error(refined, gap, planar=False),
         skipped=skipped,
         average_points=len(average_t),
     )
 
 
-def _binned(trajectory: Trajectory, time_bin: float, t0: float) -> dict[int, np.ndarray]:
-    """The mean position of a trajectory in each time bin it has detections in."""
-    bins = np.floor((trajectory.t - t0) / time_bin).astype(np.int64)
-    return {int(b): trajectory.xyz[bins == b].mean(axis=0) for b in np.unique(bins)}
-
-
 def alignment_error(
-    trajectories: Mapping[str, Trajectory], time_bin: float = 0.25, planar: bool = True
+    trajectories: Mapping[str, Trajectory], max_gap: float = 0.5, planar: bool = True
 ) -> float:
     """Mean distance (m) between two sensors' detections of the person at the same time
-    (the paper's Figure 19): each sensor's detections are averaged per time bin, and the
-    distances between every two sensors seen in the same bin are averaged (x-y only when
-    ``planar``, as the tracker works on the ground plane)."""
-    if not trajectories:
-        return float("nan")
-    t0 = min(float(tr.t.min()) for tr in trajectories.values() if len(tr.t))
-    binned = [_binned(tr, time_bin, t0) for tr in trajectories.values() if len(tr.t)]
+    (the paper's Figure 19): every detection of every sensor against every other sensor's
+    trajectory interpolated to its time (x-y only when ``planar``, as the tracker works on
+    the ground plane)."""
     dims = slice(0, 2) if planar else slice(0, 3)
     distances = []
-    for i, a in enumerate(binned):
-        for b in binned[i + 1 :]:
-            for key in a.keys() & b.keys():
-                distances.append(float(np.linalg.norm(a[key][dims] - b[key][dims])))
-    return float(np.mean(distances)) if distances else float("nan")
+    for a, ta in trajectories.items():
+        for b, tb in trajectories.items():
+            if a == b:
+                continue
+            other = _interpolate(tb, ta.t, max_gap)
+            valid = np.all(np.isfinite(other), axis=1)
+            if valid.any():
+                distances.append(np.linalg.norm(ta.xyz[valid, dims] - other[valid, dims], axis=1))
+    if not distances:
+        return float("nan")
+    return float(np.mean(np.concatenate(distances)))

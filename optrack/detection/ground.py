@@ -367,6 +367,8 @@ class GroundEstimator:
     given by the operator, the saved plane when ``read_ground_from_file``,
     the calibration combined with the cloud's plane, the cloud's plane);
     afterwards each frame's floor points refit it unless ``lock_ground``.
+    Planes are saved to and read from ``store`` (default: the user's
+    ``~/.config/optrack/ground``).
     """
 
     def __init__(
@@ -393,8 +395,8 @@ class GroundEstimator:
         if self.plane is not None:
             return True
         p = self.params
-        if p.read_ground_from_file and self.store is not None:
-            saved = self.store.load(self.sensor_id)
+        if p.read_ground_from_file:
+            saved = (self.store or GroundStore()).load(self.sensor_id)
             if saved is not None:
                 self.plane, self.source = saved, "file"
                 return True
@@ -434,7 +436,8 @@ class GroundEstimator:
         return heights
 
     def save(self) -> Path | None:
-        """Save the current plane for this sensor (needs a store)."""
-        if self.store is None or self.plane is None:
+        """Save the current plane for this sensor (in the default store when none was
+        given); None when there is no plane yet."""
+        if self.plane is None:
             return None
-        return self.store.save(self.sensor_id, self.plane, self.source)
+        return (self.store or GroundStore()).save(self.sensor_id, self.plane, self.source)

@@ -95,6 +95,7 @@ class Scene:
     confidence_std: float = 1.1
     false_alarm_confidence_mean: float = -1.2
     histogram_noise: float = 0.15
+    occluder_colour_share: float = 0.3  # of a partly hidden person's histogram
     truth_rate: float = 30.0
 
 
@@ -203,8 +204,9 @@ def render(
                 hist = np.asarray(p.histogram, dtype=np.float64)
                 if hist.size:
                     hist = hist * rng.lognormal(0.0, scene.histogram_noise, size=hist.size)
-                    if partly and blocker_hist:
-                        hist = 0.7 * hist / hist.sum() + 0.3 * np.asarray(blocker_hist)
+                    if partly and blocker_hist:  # the occluder's colours leak in
+                        share = scene.occluder_colour_share
+                        hist = (1 - share) * hist / hist.sum() + share * np.asarray(blocker_hist)
                     hist = hist / hist.sum()
                 detections.append(
                     Detection(

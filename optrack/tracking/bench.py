@@ -8,9 +8,10 @@
   synthetic scenes with known answers and, when the simulator is built, the
   detector's output on short simulated recordings of the ``crowd``,
   ``distance`` and ``occlusions`` scenarios (made once and cached, see
-  :func:`bench_cache`). norfair is tuned fairly: a grid of its distance
-  threshold, hit counter and initialisation delay is searched on a different
-  seed of each scene, and the best setting is then scored.
+  :func:`bench_cache`). norfair is tuned generously: a grid of its distance
+  threshold, hit counter and initialisation delay is searched on the very
+  stream it is scored on, and its best result is reported; our tracker runs
+  at its defaults.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ __all__ = ["BenchStream", "bench_cache", "cmd_bench_tracking", "run_norfair", "r
 NORFAIR_DISTANCES = (0.4, 0.7, 1.0)
 NORFAIR_MEMORY_S = (0.3, 1.0)
 NORFAIR_DELAY_S = (0.0, 0.1)
+NO_THRESHOLD = -100.0  # norfair's detection_threshold that keeps every detection
 
 
 @dataclasses.dataclass
@@ -133,18 +135,26 @@ def run_norfair(
     return _score(stream, outputs), statistics.median(update_ms)
 
 
-def _tune_norfair(tuning: BenchStream, min_confidence: float) -> dict[str, float]:
-    best: tuple[float, int, dict[str, float]] | None = None
-    for distance, memory, delay in itertools.product(
-        NORFAIR_DISTANCES, NORFAIR_MEMORY_S, NORFAIR_DELAY_S
+def _tune_norfair(
+    stream: BenchStream, min_confidence: float
+) -> tuple[dict[str, float], MotScore, float]:
+    """norfair's best setting on this stream (higher MOTA, then fewer switches)."""
+    best: tuple[tuple[float, int], dict[str, float], MotScore, float] | None = None
+    for distance, memory, delay, threshold in itertools.product(
+        NORFAIR_DISTANCES, NORFAIR_MEMORY_S, NORFAIR_DELAY_S, (NO_THRESHOLD, min_confidence)
     ):
-        setting = {"distance": distance, "memory_s": memory, "delay_s": delay}
-        score, _ = run_norfair(tuning, min_confidence=min_confidence, **setting)
+        setting = {
+            "distance": distance,
+            "memory_s": memory,
+            "delay_s": delay,
+            "min_confidence": threshold,
+        }
+        score, ms = run_norfair(stream, **setting)
         key = (score.mota, -score.idsw)
-        if best is None or key > (best[0], best[1]):
-            best = (score.mota, -score.idsw, setting)
+        if best is None or key > best[0]:
+            best = (key, setting, score, ms)
     assert best is not None
-    return best[2]
+    return best[1], best[2], best[3]
 
 
 def bench_cache() -> Path:
@@ -158,7 +168,12 @@ def bench_cache() -> Path:
 
 
 #: simulated scenes of the comparison: (scenario, sensors, seconds)
-SIM_SCENES = (("crowd", 3, 20.0), ("distance", 1, 20.0), ("occlusions", 1, 20.0))
+SIM_SCENES = (
+    ("crowd", 3, 20.0),
+    ("distance", 3, 20.0),
+    ("occlusions", 3, 20.0),
+    ("occlusions", 1, 20.0),
+)
 
 
 def _sim_stream(scenario: str, sensors: int, seconds: float, seed: int) -> BenchStream | None:
@@ -193,18 +208,25 @@ def _sim_stream(scenario: str, sensors: int, seconds: float, seed: int) -> Bench
     truth = Truth.from_instants(list(recording.ground_truth()), recording.sensor_ids)
     counted = [truth.counted(k, recording.sensor_ids, 0.2) for k in range(len(truth.times))]
     return BenchStream(
-        f"sim-{scenario}", "sim", sensors, batches, truth.times, truth.ids, truth.xy, counted
+        f"sim-{scenario}-{sensors}",
+        "sim",
+        sensors,
+        batches,
+        truth.times,
+        truth.ids,
+        truth.xy,
+        counted,
     )
 
 
-def _synthetic_streams(seed: int) -> list[BenchStream]:
+def _synthetic_streams(seed: int, seconds: float = 30.0) -> list[BenchStream]:
     out = []
     for name, people, sensors in (
-        ("synthetic-crowd", 7, 3),
-        ("synthetic-one-sensor", 7, 1),
-        ("synthetic-dense", 15, 4),
+        ("synthetic-crowd-3", 7, 3),
+        ("synthetic-crowd-1", 7, 1),
+        ("synthetic-dense-4", 15, 4),
     ):
-        scene = crowd_scene(people, sensors, 60.0, seed=seed)
+        scene = crowd_scene(people, sensors, seconds, seed=seed)
         batches, truth = render(scene, seed=seed)
         out.append(_from_synthetic(name, batches, truth, sensors))
     return out
@@ -231,15 +253,16 @@ def speed_20x10(seconds: float = 20.0, seed: int = 0) -> dict[str, float]:
 
 
 def _compare(
-    streams: Sequence[tuple[BenchStream, BenchStream]], min_confidence: float, norfair_ok: bool
+    streams: Sequence[BenchStream], min_confidence: float, norfair_ok: bool
 ) -> dict[str, Any]:
     out: dict[str, Any] = {}
-    for stream, tuning in streams:
+    for stream in streams:
         ours, ours_ms = run_ours(stream)
         entry: dict[str, Any] = {
             "source": stream.source,
             "sensors": stream.sensors,
             "frames": ours.frames,
+            "objects": ours.objects,
             "ours": {
                 "mota": round(ours.mota, 4),
                 "idsw": ours.idsw,
@@ -248,9 +271,9 @@ def _compare(
                 "ms_per_update": round(ours_ms, 4),
             },
         }
+        line = f"bench tracking: {stream.name}: ours MOTA {ours.mota:.3f}, {ours.idsw} switches"
         if norfair_ok:
-            setting = _tune_norfair(tuning, min_confidence)
-            theirs, theirs_ms = run_norfair(stream, min_confidence=min_confidence, **setting)
+            setting, theirs, theirs_ms = _tune_norfair(stream, min_confidence)
             entry["norfair"] = {
                 "mota": round(theirs.mota, 4),
                 "idsw": theirs.idsw,
@@ -260,11 +283,9 @@ def _compare(
                 "settings": setting,
             }
             entry["better_than_norfair"] = ours.mota > theirs.mota and ours.idsw < theirs.idsw
+            line += f"; norfair MOTA {theirs.mota:.3f}, {theirs.idsw} switches"
         out[stream.name] = entry
-        _info(
-            f"bench tracking: {stream.name}: ours MOTA {ours.mota:.3f} / {ours.idsw} switches"
-            + (f"; norfair MOTA {theirs.mota:.3f} / {theirs.idsw}" if norfair_ok else "")
-        )
+        _info(line)
     return out
 
 
@@ -282,13 +303,12 @@ def cmd_bench_tracking(args: argparse.Namespace) -> int:
         result["norfair_missing"] = "norfair is not installed: pip install norfair (no deps)"
         norfair_ok = False
     min_confidence = float(TRACKING_PARAMS.create().min_confidence_initialization)
-    pairs = list(zip(_synthetic_streams(seed=1), _synthetic_streams(seed=2), strict=True))
+    streams = _synthetic_streams(seed=1)
     for scenario, sensors, seconds in SIM_SCENES:
         stream = _sim_stream(scenario, sensors, seconds, seed=1)
-        tuning = _sim_stream(scenario, sensors, seconds, seed=2) if stream is not None else None
-        if stream is not None and tuning is not None:
-            pairs.append((stream, tuning))
-    result["scenarios"] = _compare(pairs, min_confidence, norfair_ok)
+        if stream is not None:
+            streams.append(stream)
+    result["scenarios"] = _compare(streams, min_confidence, norfair_ok)
     if norfair_ok:
         result["better_than_norfair_everywhere"] = all(
             e["better_than_norfair"] for e in result["scenarios"].values()

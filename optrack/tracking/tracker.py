@@ -177,7 +177,8 @@ class Tracker:
         confidence = np.array([d.confidence for d in detections], dtype=np.float64)
         position_var = position_variance(_sensor_distances(detections), p)
         appearance = self.appearance_enabled
-        # an occluded detection's colours are partly someone else's: no appearance for it
+        # an occluded detection's colours are partly someone else's or something else's:
+        # no appearance for it
         features = (
             self.appearance.features([[] if d.occluded else d.histogram for d in detections])
             if appearance and m
@@ -366,11 +367,12 @@ class Tracker:
         detections: list[Detection],
         features: np.ndarray,
     ) -> None:
-        """Each associated, unoccluded detection teaches its track; the others are negatives."""
+        """Each associated, unoccluded detection teaches its track (and is kept for identity
+        recovery among its first ones); the batch's others are negatives."""
         for i, j in pairs:
             track = self.tracks[i]
             if not np.all(np.isfinite(features[j])):
-                continue
+                continue  # occluded, or no histogram
             if len(track.features) < self.appearance_params.recovery_detections:
                 track.features.append(features[j])
             self.appearance.learn(t, track.id, features[j], np.delete(features, j, axis=0))

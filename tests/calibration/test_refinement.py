@@ -84,9 +84,13 @@ def test_sensors_with_too_few_detections_are_left_alone_and_listed(network):
 
 def test_alignment_error_is_the_mean_distance_between_sensors_at_the_same_time():
     t = np.arange(0.0, 4.0, 0.1)
-    path = np.column_stack([t, np.zeros_like(t), np.ones_like(t)])
+    path = np.column_stack([t, np.zeros_like(t), np.ones_like(t)])  # walking at 1 m/s
     same = {"a": Trajectory(t, path), "b": Trajectory(t, path)}
     assert alignment_error(same) == pytest.approx(0.0)
+    # Another sensor's frames fall between: interpolated, the same person at the same time.
+    later = t[:-1] + 0.037
+    between = {"a": Trajectory(t, path), "b": Trajectory(later, path[:-1] + [0.037, 0.0, 0.0])}
+    assert alignment_error(between) == pytest.approx(0.0, abs=1e-9)
     shifted = {"a": Trajectory(t, path), "b": Trajectory(t, path + [0.0, 0.05, 0.02])}
     assert alignment_error(shifted) == pytest.approx(0.05)
     assert alignment_error(shifted, planar=False) == pytest.approx(np.hypot(0.05, 0.02))

@@ -186,6 +186,8 @@ def test_planes_are_saved_and_loaded_per_sensor(tmp_path):
     params = detection_params(overrides={"read_ground_from_file": True})
     estimator = GroundEstimator(params, store=store, sensor_id="kinect_b")
     assert estimator.initialise(np.empty((0, 3))) and estimator.source == "file"
+    saved = GroundEstimator(PARAMS, plane=b, store=store, sensor_id="kinect_d").save()
+    assert saved == store.path("kinect_d") and store.load("kinect_d") is not None
     store.path("kinect_a").write_text("{not json")
     with pytest.raises(GroundError, match="damaged"):
         store.load("kinect_a")
