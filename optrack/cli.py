@@ -322,6 +322,12 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument(
         "--rate", type=float, default=10.0, help="frames per second run through the detector"
     )
+    q.add_argument(
+        "--dof",
+        choices=("full", "heading"),
+        default="full",
+        help="full: also level each camera's tilt (Algorithm 1); heading: keep the tilts",
+    )
     _add_json(q)
     q = command(
         "ground",

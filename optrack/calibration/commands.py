@@ -585,7 +585,7 @@ def cmd_refine(args: argparse.Namespace) -> int:
     recording = Recording(args.recording)
     calibration = load_calibration(args.calibration)
     calibration.require(recording.sensor_ids, f"file {args.calibration}")
-    params = REFINEMENT_PARAMS.create()
+    params = REFINEMENT_PARAMS.create({"dof": args.dof})
     trajectories, crowded = person_trajectories(recording, calibration, args.rate, _info)
     for sid, frames in sorted(crowded.items()):
         _info(

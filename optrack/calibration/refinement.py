@@ -124,11 +124,11 @@ REFINEMENT_PARAMS = register(
             ),
             Param(
                 "dof",
-                "heading",
-                choices=("heading", "full"),
-                help="What a correction may change: heading (x, y, z and the turn about the "
-                "vertical; the camera's tilt stays the checkerboard's) or full (also the tilt, "
-                "from the trajectory's levelness: for a network whose tilts are wrong).",
+                "full",
+                choices=("full", "heading"),
+                help="What a correction may change: full (also the camera's tilt, levelling its "
+                "trajectory, as Algorithm 1) or heading (x, y, z and the turn about the "
+                "vertical only: the tilt stays the checkerboard's).",
             ),
             Param(
                 "keep_frame",

@@ -39,7 +39,14 @@ from optrack.detection.params import detection_params
 from optrack.detection.pipeline import PeopleDetector
 from optrack.types import Intrinsics
 
-__all__ = ["PCL_GROUND", "PCL_PEOPLE_XZ", "bench_detection", "match_people", "real_data_dir"]
+__all__ = [
+    "PCL_GROUND",
+    "PCL_PEOPLE_XZ",
+    "bench_detection",
+    "match_people",
+    "real_data_dir",
+    "real_frame_figures",
+]
 
 #: PCL's unit test: Kinect v1 intrinsics and the floor it sets (camera frame).
 PCL_INTRINSICS = Intrinsics(525.0, 525.0, 319.5, 239.5, 640, 480)
@@ -88,7 +95,8 @@ def _info(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
-def _real_frames(data: Path) -> dict[str, Any]:
+def real_frame_figures(data: Path) -> dict[str, Any]:
+    """The figures on PCL's real frames in ``data``/pcl (speed, people found, floor)."""
     from optrack.io.pcd import read_pcd
 
     pcl = data / "pcl"
@@ -245,7 +253,7 @@ def bench_detection(args: argparse.Namespace) -> int:
     data = real_data_dir()
     if (data / "pcl" / "five_people.pcd").is_file():
         _info(f"bench detection: real frames from {data / 'pcl'} ({RUNS} timed runs)...")
-        result.update(_real_frames(data))
+        result.update(real_frame_figures(data))
     else:
         _info(f"bench detection: no real data at {data}; the real-frame figures are null.")
     with tempfile.TemporaryDirectory(prefix="optrack-bench-detection-") as work:

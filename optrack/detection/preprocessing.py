@@ -15,10 +15,9 @@ import cv2
 import numpy as np
 import open3d as o3d
 
-from optrack.errors import UserError
 from optrack.types import Intrinsics, RGBDFrame
 
-__all__ = ["OrganisedCloud", "check_intrinsics", "denoise", "select_points", "voxel_grid"]
+__all__ = ["OrganisedCloud", "denoise", "select_points", "voxel_grid"]
 
 
 @functools.lru_cache(maxsize=8)
@@ -168,13 +167,3 @@ def denoise(points: np.ndarray, mean_k: int, std_dev: float) -> np.ndarray:
     )
     _, kept = cloud.remove_statistical_outlier(int(mean_k), float(std_dev))
     return points[np.asarray(kept, dtype=np.int64)]
-
-
-def check_intrinsics(intrinsics: Intrinsics | None, what: str) -> Intrinsics:
-    """The intrinsics, or a :class:`UserError` saying they are needed."""
-    if intrinsics is None:
-        raise UserError(
-            f"{what} needs the camera intrinsics; give --intrinsics fx,fy,cx,cy (pixels), "
-            "e.g. --intrinsics 525,525,319.5,239.5 for a Kinect v1."
-        )
-    return intrinsics
