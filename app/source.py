@@ -60,16 +60,9 @@ NODE_STAGES = ("detection", "tracking", "appearance", "smoothing", "outputs")
 def node_schemas() -> dict[str, Schema]:
     """The schemas of the nodes' live stages, after importing every module whose stages a
     node may run (as ``optrack.runtime.config`` does), so a site's stages are all known."""
-    import optrack.detection.params  # noqa: F401 - each import registers its schemas
-    import optrack.net.clock  # noqa: F401
-    import optrack.net.config  # noqa: F401
-    import optrack.outputs.streams  # noqa: F401
-    import optrack.recording.format  # noqa: F401
-    import optrack.runtime.config  # noqa: F401
-    import optrack.runtime.site_params  # noqa: F401
-    import optrack.sensors.playback  # noqa: F401
-    import optrack.tracking.params  # noqa: F401
+    from optrack.runtime.config import register_node_stages
 
+    register_node_stages()
     return {stage: REGISTRY[stage] for stage in NODE_STAGES if stage in REGISTRY}
 
 

@@ -93,7 +93,7 @@ class Scene:
     false_alarms_per_frame: float = 0.05
     confidence_mean: float = 0.4  # like the detector's HOG margins on simulated people
     confidence_std: float = 1.1
-    false_alarm_confidence_mean: float = -1.2
+    false_alarm_confidence_mean: float = -2.2  # the detector's false alarms: about -2.7
     histogram_noise: float = 0.15
     occluder_colour_share: float = 0.3  # of a partly hidden person's histogram
     truth_rate: float = 30.0

@@ -87,7 +87,7 @@ NODE_PARAMS = register(
 )
 
 
-def _register_stages() -> None:
+def register_node_stages() -> None:
     """Import every module whose stages a node may take (they register their schemas)."""
     import optrack.detection.params  # noqa: F401
     import optrack.net.clock  # noqa: F401
@@ -124,7 +124,7 @@ def load_node_config(
     path: str | os.PathLike[str] | None, overrides: Mapping[str, Mapping[str, Any]] | None = None
 ) -> NodeConfig:
     """Every stage's parameters from a YAML file (defaults without one), then ``overrides``."""
-    _register_stages()
+    register_node_stages()
     explicit: dict[str, dict[str, Any]] = {}
     if path:
         params = load_config(path)  # validates everything, one sentence on error

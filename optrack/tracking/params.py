@@ -146,7 +146,7 @@ TRACKING_PARAMS = register(
             ),
             Param(
                 "min_confidence_initialization",
-                -1.0,
+                -1.5,
                 min=-100.0,
                 max=100.0,
                 step=0.1,
