@@ -141,7 +141,7 @@ def cmd_cloud(args: argparse.Namespace) -> int:
 BENCHES: dict[str, str | None] = {
     "sim": "optrack.sim.bench:cmd_bench_sim",
     "detection": "optrack.detection.bench:bench_detection",
-    "tracking": None,
+    "tracking": "optrack.tracking.bench:cmd_bench_tracking",
     "calibration": "optrack.calibration.bench:bench_calibration",
     "e2e": "optrack.runtime.bench:bench_e2e",
 }

@@ -366,8 +366,8 @@ def _world_from_points(
     """new_world_T_world from points of known world coordinates (Kabsch, Open3D).
 
     Each point: ``{sensor, world: [x, y, z]}`` and either ``camera: [x, y, z]`` (metres in
-    that camera) or ``u, v`` (a pixel; its depth is read from the recording's first
-    frame of that sensor, or ``frame: N``).
+    that camera) or ``u, v`` (a pixel of the depth image; its depth is read from the
+    recording's first frame of that sensor, or ``frame: N``).
     """
     import open3d as o3d
 
@@ -411,7 +411,15 @@ def _world_from_points(
                     "depth; click a point on a surface the sensor measures."
                 )
             k = frame.intrinsics
-            camera_xyz = np.array([(u - k.cx) / k.fx * z, (v - k.cy) / k.fy * z, z])
+            if k.has_distortion:
+                import cv2
+
+                x, y = cv2.undistortPoints(
+                    np.array([[[u, v]]], dtype=np.float64), k.K, k.dist_coeffs
+                ).reshape(2)
+            else:
+                x, y = (u - k.cx) / k.fx, (v - k.cy) / k.fy
+            camera_xyz = np.array([x * z, y * z, z])
         else:
             raise CalibrateError(f"points file {path}: point {n} needs 'camera' or 'u' and 'v'.")
         pose = calibration.sensors[sid].pose

@@ -77,7 +77,8 @@ class TrackerStatus:
     sensors: dict[str, float]  # sensor -> stamp of its last batch
     silent_sensors: list[str]
     appearance: bool
-    recovered_identities: int
+    recovered_identities: int  # new tracks given a lost identity back
+    appearance_matches: int  # detections given to lost tracks by appearance alone
     warnings: list[str]
 
 
@@ -105,6 +106,7 @@ class Tracker:
         self.dropped_by_sensor: collections.Counter[str] = collections.Counter()
         self.sensor_last: dict[str, float] = {}
         self.recovered = 0
+        self.appearance_matches = 0
         self.appearance = AppearanceModel(self.appearance_params)
         self._derived_key: tuple[object, ...] = ()
         self._refresh()
@@ -338,6 +340,7 @@ class Tracker:
             x, P = self._initial_state(positions[j], position_var[j])
             self._take(track, max(track.t, t), x, P, t, sensor, detections[j])
             self._absorb_young(track, positions[j], lost_since)
+            self.appearance_matches += 1
             out.append(j)
         return out
 
@@ -543,6 +546,7 @@ class Tracker:
             silent_sensors=silent,
             appearance=self.appearance_enabled,
             recovered_identities=self.recovered,
+            appearance_matches=self.appearance_matches,
             warnings=warnings,
         )
 

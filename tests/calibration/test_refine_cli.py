@@ -29,7 +29,9 @@ def walk(tmp_path_factory):
 def test_refine_cli_undoes_most_of_a_10_cm_2_degree_perturbation(walk, tmp_path, capsys):
     perturbed = tmp_path / "perturbed.yaml"
     refined = tmp_path / "refined.yaml"
-    assert main(["calibrate", "truth", str(walk), "--out", str(perturbed), "--perturb", "0.1,2"]) == 0
+    assert (
+        main(["calibrate", "truth", str(walk), "--out", str(perturbed), "--perturb", "0.1,2"]) == 0
+    )
     capsys.readouterr()
     code = main(
         ["calibrate", "refine", str(walk), "--calibration", str(perturbed), "--out", str(refined)]

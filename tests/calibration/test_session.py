@@ -258,3 +258,28 @@ def test_truth_cli_writes_the_true_poses_perturbed_by_exactly_what_was_asked(
         assert rotation_angle_deg(moved, pose) == pytest.approx(2.0)
     assert main(["calibrate", "truth", str(path), "--out", str(out), "--perturb", "ten"]) == 1
     assert "METRES,DEGREES" in capsys.readouterr().err
+
+
+def test_ground_cli_takes_clicked_pixels_and_reads_their_depth(board_recording, tmp_path, capsys):
+    from optrack.recording import Recording
+
+    path, truth, file, _ = _perturbed_file(board_recording, tmp_path)
+    recording = Recording(path)
+    points = []
+    for sid, pose in truth.items():
+        frame = recording.frame(sid, 0)
+        depth, k = frame.depth_m(), frame.intrinsics
+        for u, v in ((60, 200), (260, 190), (160, 230)):
+            z = float(depth[v, u])
+            camera = np.array([(u - k.cx) / k.fx * z, (v - k.cy) / k.fy * z, z])
+            world = pose[:3, :3] @ camera + pose[:3, 3]
+            points.append({"sensor": sid, "u": u, "v": v, "world": world.tolist()})
+    points_file = tmp_path / "clicks.yaml"
+    points_file.write_text(yaml.safe_dump({"points": points}))
+    out = tmp_path / "clicked.yaml"
+    args = ["calibrate", "ground", str(path), "--calibration", str(file)]
+    assert main([*args, "--points", str(points_file), "--out", str(out), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["points_rms_m"] < 1e-6
+    placed = load_calibration(out)
+    for sid, pose in truth.items():
+        np.testing.assert_allclose(placed.pose(sid), pose, atol=1e-6)

@@ -114,3 +114,41 @@ def test_a_deleted_identity_is_given_back_to_a_new_track_that_looks_like_it() ->
     red_ids = ids_of(red, outputs, truth.times)
     assert len(set(red_ids)) == 1, f"red had tracks {sorted(set(red_ids))}"
     assert tracker.status().recovered_identities >= 1
+
+
+def _walk(tracker, t0: float, t1: float, people) -> None:
+    from optrack.types import Detection, DetectionBatch
+
+    k = 0
+    while t0 + k / 30 < t1 - 1e-9:
+        t = t0 + k / 30
+        batch = [
+            Detection(x=x(t), y=y, z=0.9, height=1.7, confidence=1.0, histogram=list(h))
+            for x, y, h in people
+            if x(t) is not None
+        ]
+        tracker.update(DetectionBatch("cam", t, detections=batch))
+        k += 1
+
+
+@pytest.mark.parametrize("appearance", ["on", "off"])
+def test_a_lost_person_found_outside_the_motion_gate_is_recognised_by_appearance(
+    appearance: str,
+) -> None:
+    """Red walks at 1 m/s, is hidden for 1 s, and comes back 1.8 m behind where she was
+    last seen: within reach, outside a tight motion gate. Green stands by all along."""
+    from optrack.tracking import TRACKING_PARAMS, Tracker
+
+    tracker = Tracker(TRACKING_PARAMS.create({"appearance": appearance, "gate_probability": 0.5}))
+    green = (lambda t: 6.0, 5.0, GREEN)
+    _walk(tracker, 0.0, 3.0, [(lambda t: 1.0 + t, 2.0, RED), green])
+    red_id = min(tr.id for tr in tracker.tracks if tr.x[1] < 3.0)
+    _walk(tracker, 3.0, 4.0, [green])
+    _walk(tracker, 4.0, 5.0, [(lambda t: 2.2, 2.0, RED), green])
+    red_now = [tr.id for tr in tracker.tracks if tr.x[1] < 3.0 and tr.last_detection > 4.5]
+    if appearance == "on":
+        assert red_now == [red_id]
+        status = tracker.status()
+        assert status.appearance_matches + status.recovered_identities >= 1
+    else:
+        assert red_now and red_now != [red_id]
