@@ -125,6 +125,7 @@ class IntrinsicsResult:
                 str(name(i)): e for i, e in zip(self.used, self.per_view_rms, strict=True)
             },
             "coverage": self.coverage.fraction,
+            "coverage_map": self.coverage.as_lists(),  # corners per cell, rows top to bottom
         }
 
 
