@@ -1,10 +1,9 @@
 """The ``optrack`` command line.
 
 Every subcommand of the measurement contract (docs/architecture.md) is
-declared here with its options. A command whose part of optrack has not
-been built yet says so in one line and exits with status 69 (EX_UNAVAILABLE);
-it never prints made-up figures. With ``--json`` a command prints one JSON
-object on stdout; progress and messages go to stderr.
+declared here with its options; its handler lives with the part it runs and
+is imported only when the command runs. With ``--json`` a command prints one
+JSON object on stdout; progress and messages go to stderr.
 """
 
 from __future__ import annotations
@@ -24,7 +23,6 @@ from optrack.errors import UserError
 EXIT_OK = 0
 EXIT_ERROR = 1
 EXIT_USAGE = 2
-EXIT_UNAVAILABLE = 69
 
 
 class CommandError(UserError):
@@ -41,19 +39,6 @@ def info(message: str) -> None:
 
 
 Handler = Callable[[argparse.Namespace], int]
-
-
-class NotAvailable:
-    """The handler of a command whose part of optrack is not built yet."""
-
-    def __init__(self, what: str) -> None:
-        self.what = what
-
-    def __call__(self, args: argparse.Namespace) -> int:
-        info(
-            f"optrack {args.command_name}: not available yet; {self.what} is not built into this version."
-        )
-        return EXIT_UNAVAILABLE
 
 
 def resolve(handler: str | Handler) -> Handler:
@@ -136,9 +121,8 @@ def cmd_cloud(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-# Each benchmark is a handler "module:function" taking the parsed arguments;
-# None until the part it measures is built.
-BENCHES: dict[str, str | None] = {
+# Each benchmark is a handler "module:function" taking the parsed arguments.
+BENCHES: dict[str, str] = {
     "sim": "optrack.sim.bench:cmd_bench_sim",
     "detection": "optrack.detection.bench:bench_detection",
     "tracking": "optrack.tracking.bench:cmd_bench_tracking",
@@ -148,10 +132,7 @@ BENCHES: dict[str, str | None] = {
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    handler = BENCHES[args.what]
-    if handler is None:
-        return NotAvailable(f"the part that 'bench {args.what}' measures")(args)
-    return int(resolve(handler)(args) or 0)
+    return int(resolve(BENCHES[args.what])(args) or 0)
 
 
 def cmd_gui(args: argparse.Namespace) -> int:
@@ -238,7 +219,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, help="recording or sensor: stop after this many frames")
     p.add_argument("--color", help="depth image: registered colour image of the same size")
     p.add_argument(
-        "--depth-scale", type=float, help="depth image: metres per unit (default 0.001: millimetres)"
+        "--depth-scale",
+        type=float,
+        help="depth image: metres per unit (default 0.001: millimetres)",
     )
     _add_json(p)
 

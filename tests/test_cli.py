@@ -1,5 +1,4 @@
-"""The command line: every subcommand of the measurement contract has a --help, and
-commands whose part is not built yet say so in one line instead of faking output."""
+"""The command line: every subcommand of the measurement contract exists and has a --help."""
 
 import argparse
 import subprocess
@@ -8,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from optrack.cli import EXIT_UNAVAILABLE, NotAvailable, build_parser, main
+from optrack.cli import build_parser, main
 
 CONTRACT = [
     ["sim"],
@@ -57,41 +56,6 @@ def test_console_script_is_installed_and_answers():
     optrack = Path(sys.executable).parent / "optrack"
     result = subprocess.run([str(optrack), "--version"], capture_output=True, text=True, check=True)
     assert result.stdout.startswith("optrack ")
-
-
-def unavailable_invocations():
-    minimal = {
-        "sim": ["mixed", "--out", "x"],
-        "detect": ["x.pcd"],
-        "eval": ["rec"],
-        "intrinsics": ["a.png", "--board", "9x6", "--square", "0.025"],
-        "stereo": ["--board", "9x6", "--square", "0.025", "--left", "l.png", "--right", "r.png"],
-        "network": ["rec", "--out", "c.yaml"],
-        "refine": ["rec", "--calibration", "c.yaml", "--out", "d.yaml"],
-        "run": ["--headless"],
-        "sensors": [],
-        "record": ["--sensor", "openni://Dummy", "--seconds", "1", "--out", "x"],
-        "track": ["--site", "s"],
-    }
-    for path, sub in subcommands(build_parser()):
-        handler = sub.get_default("handler")
-        if isinstance(handler, NotAvailable):
-            extra = (
-                ["--sensor", "openni://Dummy", "--site", "s"]
-                if path == ("node", "detect")
-                else minimal.get(path[-1], [])
-            )
-            yield [*path, *extra]
-
-
-def test_commands_not_built_yet_say_so_in_one_line(capsys):
-    invocations = list(unavailable_invocations())
-    if not invocations:
-        pytest.skip("every command is built: nothing is unavailable any more")
-    for argv in invocations:
-        assert main(argv) == EXIT_UNAVAILABLE, argv
-        err = capsys.readouterr().err
-        assert err.count("\n") == 1 and "not available yet" in err, argv
 
 
 def test_no_command_prints_usage_and_fails(capsys):

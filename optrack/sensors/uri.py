@@ -16,7 +16,6 @@ attached fails with one sentence that lists what is attached.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import urllib.parse
 from collections.abc import Mapping
 from typing import Any
@@ -139,24 +138,9 @@ def attached_summary() -> str:
 
 
 def _simulated(uri: SensorURI) -> Sensor:
-    try:
-        module = importlib.import_module("optrack.sensors.simulated")
-    except ModuleNotFoundError as error:
-        if error.name != "optrack.sensors.simulated":
-            raise
-        raise SensorError(
-            f"sensor URI '{uri}' needs the simulator, which is not built yet "
-            "(optrack.sensors.simulated is missing); use file:// or openni:// meanwhile."
-        ) from None
-    cls = module.SimulatedSensor
-    if hasattr(cls, "from_uri"):
-        return cls.from_uri(uri.text)
-    scenario, _, number = uri.target.rpartition("/")
-    if not scenario or not number.isdigit():
-        raise SensorError(
-            f"sensor URI '{uri}' must be sim://SCENARIO/N with N the sensor number (0, 1, ...)."
-        )
-    return cls(scenario, int(number))
+    from optrack.sensors.simulated import SimulatedSensor
+
+    return SimulatedSensor.from_uri(uri.text)
 
 
 def _build(uri: SensorURI, config: Mapping[str, Params] | None) -> Sensor:

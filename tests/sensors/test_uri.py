@@ -54,13 +54,6 @@ def test_config_parameters_apply_and_the_uri_overrides_them(tmp_path, single):
         assert sensor.params.loop is True and sensor.params.speed == 2.0
 
 
-def test_sim_uri_before_the_simulator_exists_says_it_is_not_built():
-    if importlib.util.find_spec("optrack.sensors.simulated") is not None:
-        pytest.skip("the simulator is built")
-    with pytest.raises(SensorError, match="simulator, which is not built yet"):
-        open_sensor("sim://office/0")
-
-
 def test_realsense_uri_without_pyrealsense2_says_how_to_install_it():
     if importlib.util.find_spec("pyrealsense2") is not None:
         pytest.skip("pyrealsense2 is installed")
