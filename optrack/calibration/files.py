@@ -125,6 +125,24 @@ class CalibrationFile(msgspec.Struct, forbid_unknown_fields=True):
                 "with every sensor or pick the matching file."
             )
 
+    @classmethod
+    def from_network(cls, calibration: NetworkCalibration) -> CalibrationFile:
+        """A :class:`~optrack.types.NetworkCalibration` (as it travels on the bus) as a file."""
+        return cls(
+            sensors={
+                sid: SensorEntry(
+                    world_T_camera=sensor.world_T_camera,
+                    intrinsics=sensor.intrinsics,
+                    model=sensor.model,
+                    reprojection_rms_px=sensor.reprojection_rms_px,
+                )
+                for sid, sensor in calibration.sensors.items()
+            },
+            id=calibration.notes or new_calibration_id(),
+            created=calibration.created or now_iso(),
+            ground=calibration.ground,
+        )
+
     def to_network(self) -> NetworkCalibration:
         """The shared :class:`~optrack.types.NetworkCalibration` the detectors and tracker use."""
         return NetworkCalibration(

@@ -16,10 +16,7 @@ from pathlib import Path
 from optrack.calibration.files import (
     CalibrationFile,
     CalibrationFileError,
-    SensorEntry,
     load_network,
-    new_calibration_id,
-    now_iso,
     save_calibration,
 )
 from optrack.types import NetworkCalibration
@@ -29,24 +26,6 @@ __all__ = ["CalibrationStore"]
 log = logging.getLogger("optrack.runtime")
 
 FILE_NAME = "calibration.yaml"
-
-
-def to_file(calibration: NetworkCalibration) -> CalibrationFile:
-    """A :class:`NetworkCalibration` as the calibration file format."""
-    return CalibrationFile(
-        sensors={
-            sid: SensorEntry(
-                world_T_camera=sensor.world_T_camera,
-                intrinsics=sensor.intrinsics,
-                model=sensor.model,
-                reprojection_rms_px=sensor.reprojection_rms_px,
-            )
-            for sid, sensor in calibration.sensors.items()
-        },
-        id=calibration.notes or new_calibration_id(),
-        created=calibration.created or now_iso(),
-        ground=calibration.ground,
-    )
 
 
 class CalibrationStore:
@@ -63,7 +42,7 @@ class CalibrationStore:
     def save(self, calibration: NetworkCalibration) -> Path:
         """Store atomically, keeping the previous file as ``.bak``; returns the file."""
         self.directory.mkdir(parents=True, exist_ok=True)
-        save_calibration(self.path, to_file(calibration))
+        save_calibration(self.path, CalibrationFile.from_network(calibration))
         return self.path
 
     def load(self) -> NetworkCalibration | None:

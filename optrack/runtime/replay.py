@@ -23,8 +23,9 @@ from pathlib import Path
 
 import msgspec
 
-from optrack.recording import Recording, RecordingError, SensorInfo
+from optrack.recording import RecordingError, SensorInfo
 from optrack.sensors.base import Sensor, SensorError
+from optrack.sensors.playback import open_recording_sensor
 from optrack.types import RGBDFrame
 
 __all__ = ["LiveReplay"]
@@ -45,23 +46,7 @@ class LiveReplay(Sensor):
         sensor_id: str | None = None,
         uri: str = "",
     ) -> None:
-        try:
-            self.recording = Recording(path)
-        except RecordingError as error:
-            raise SensorError(str(error)) from None
-        ids = self.recording.sensor_ids
-        if sensor is None:
-            if len(ids) != 1:
-                raise SensorError(
-                    f"recording {self.recording.path} has sensors {', '.join(ids)}; name one, "
-                    f"e.g. file://{self.recording.path}#{ids[0]}."
-                )
-            sensor = ids[0]
-        if sensor not in self.recording.sensors:
-            raise SensorError(
-                f"recording {self.recording.path} has no sensor '{sensor}' (it has: "
-                f"{', '.join(ids)}); pick one of those after '#'."
-            )
+        self.recording, sensor = open_recording_sensor(path, sensor)
         if not speed > 0:
             raise SensorError(f"replay speed must be > 0; got {speed}.")
         self.recorded_id = sensor

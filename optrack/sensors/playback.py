@@ -14,7 +14,7 @@ from optrack.recording import IndexEntry, Recording, RecordingError, SensorInfo
 from optrack.sensors.base import Sensor, SensorError
 from optrack.types import RGBDFrame
 
-__all__ = ["PLAYBACK_PARAMS", "PlaybackSensor"]
+__all__ = ["PLAYBACK_PARAMS", "PlaybackSensor", "open_recording_sensor"]
 
 PLAYBACK_PARAMS = register(
     Schema(
@@ -44,6 +44,31 @@ PLAYBACK_PARAMS = register(
 )
 
 
+def open_recording_sensor(
+    path: str | os.PathLike[str], sensor: str | None
+) -> tuple[Recording, str]:
+    """Open a recording and pick one of its sensors (the only one when ``sensor`` is None),
+    with one sentence when the recording or the sensor is not there."""
+    try:
+        recording = Recording(path)
+    except RecordingError as error:
+        raise SensorError(str(error)) from None
+    ids = recording.sensor_ids
+    if sensor is None:
+        if len(ids) != 1:
+            raise SensorError(
+                f"recording {recording.path} has sensors {', '.join(ids)}; name one, "
+                f"e.g. file://{recording.path}#{ids[0]}."
+            )
+        sensor = ids[0]
+    if sensor not in recording.sensors:
+        raise SensorError(
+            f"recording {recording.path} has no sensor '{sensor}' (it has: "
+            f"{', '.join(ids)}); pick one of those after '#'."
+        )
+    return recording, sensor
+
+
 class PlaybackSensor(Sensor):
     """One sensor of a recording, frame by frame in time order.
 
@@ -61,23 +86,7 @@ class PlaybackSensor(Sensor):
         sensor_id: str | None = None,
     ) -> None:
         self.params = params if params is not None else PLAYBACK_PARAMS.create()
-        try:
-            self.recording = Recording(path)
-        except RecordingError as error:
-            raise SensorError(str(error)) from None
-        ids = self.recording.sensor_ids
-        if sensor is None:
-            if len(ids) != 1:
-                raise SensorError(
-                    f"recording {self.recording.path} has sensors {', '.join(ids)}; name one, "
-                    f"e.g. file://{self.recording.path}#{ids[0]}."
-                )
-            sensor = ids[0]
-        if sensor not in self.recording.sensors:
-            raise SensorError(
-                f"recording {self.recording.path} has no sensor '{sensor}' (it has: "
-                f"{', '.join(ids)}); pick one of those after '#'."
-            )
+        self.recording, sensor = open_recording_sensor(path, sensor)
         self.recorded_id = sensor
         self.sensor_id = sensor_id or sensor
         self.uri = uri or f"file://{Path(path)}#{sensor}"
