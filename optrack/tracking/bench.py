@@ -176,6 +176,21 @@ SIM_SCENES = (
 )
 
 
+def _source_digest() -> str:
+    """A short digest of the simulator's and the detector's code: cached detections are
+    made again whenever either changes."""
+    import hashlib
+
+    import optrack.detection
+    import optrack.sim
+
+    digest = hashlib.sha1()
+    for package in (optrack.sim, optrack.detection):
+        for file in sorted(Path(package.__file__).parent.glob("*.py")):
+            digest.update(file.read_bytes())
+    return digest.hexdigest()[:10]
+
+
 def _sim_stream(scenario: str, sensors: int, seconds: float, seed: int) -> BenchStream | None:
     """Detections of a short simulated recording, made once and cached; None without the
     simulator or detector."""
@@ -186,9 +201,7 @@ def _sim_stream(scenario: str, sensors: int, seconds: float, seed: int) -> Bench
         from optrack.sim.world import Simulation
     except ImportError:
         return None
-    from optrack import __version__
-
-    key = f"{scenario}-{sensors}s-{seconds:g}-seed{seed}-v{__version__}"
+    key = f"{scenario}-{sensors}s-{seconds:g}-seed{seed}-{_source_digest()}"
     folder = bench_cache() / key
     batches_file = folder / "batches.msgpack"
     recording_dir = folder / "recording"
