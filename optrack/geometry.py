@@ -8,6 +8,7 @@ frame ``b`` into frame ``a`` (``p_a = a_T_b @ p_b``), so that
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import cv2
@@ -26,6 +27,7 @@ __all__ = [
     "floor_footprint",
     "invert",
     "make_pose",
+    "pixel_rays",
     "pose_from_quaternion",
     "pose_from_rvec_tvec",
     "pose_to_quaternion",
@@ -265,8 +267,10 @@ class Plane:
 # ----------------------------------------------------- projection, back-projection
 
 
-def _pixel_rays(intrinsics: Intrinsics, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
-    """Normalised image coordinates (x/z, y/z) of every pixel centre, HxW each."""
+@functools.lru_cache(maxsize=16)
+def pixel_rays(intrinsics: Intrinsics, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised image coordinates (x/z, y/z) of every pixel centre, HxW float64 each,
+    with lens distortion undone. Cached per camera; the arrays are read-only."""
     u = np.arange(width, dtype=np.float64)
     v = np.arange(height, dtype=np.float64)
     if not intrinsics.has_distortion:
@@ -278,7 +282,10 @@ def _pixel_rays(intrinsics: Intrinsics, height: int, width: int) -> tuple[np.nda
     normalised = cv2.undistortPoints(pixels, intrinsics.K, intrinsics.dist_coeffs).reshape(
         height, width, 2
     )
-    return normalised[..., 0], normalised[..., 1]
+    x_over_z, y_over_z = normalised[..., 0].copy(), normalised[..., 1].copy()
+    x_over_z.setflags(write=False)
+    y_over_z.setflags(write=False)
+    return x_over_z, y_over_z
 
 
 def backproject(depth_m: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
@@ -293,7 +300,7 @@ def backproject(depth_m: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
     height, width = depth.shape
     z = depth.astype(np.float32, copy=True)
     z[~(z > 0)] = np.nan
-    x_over_z, y_over_z = _pixel_rays(intrinsics, height, width)
+    x_over_z, y_over_z = pixel_rays(intrinsics, height, width)
     cloud = np.empty((height, width, 3), dtype=np.float32)
     np.multiply(x_over_z, z, out=cloud[..., 0], casting="unsafe")
     np.multiply(y_over_z, z, out=cloud[..., 1], casting="unsafe")

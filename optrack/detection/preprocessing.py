@@ -9,31 +9,13 @@ voxel grid and the outlier removal.
 
 from __future__ import annotations
 
-import functools
-
-import cv2
 import numpy as np
 import open3d as o3d
 
+from optrack.geometry import pixel_rays
 from optrack.types import Intrinsics, RGBDFrame
 
 __all__ = ["OrganisedCloud", "denoise", "select_points", "voxel_grid"]
-
-
-@functools.lru_cache(maxsize=8)
-def _rays(intrinsics: Intrinsics, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
-    """x/z and y/z of every pixel centre (HxW float64 each), distortion undone."""
-    u = np.arange(width, dtype=np.float64)
-    v = np.arange(height, dtype=np.float64)
-    if not intrinsics.has_distortion:
-        x = (u - intrinsics.cx) / intrinsics.fx
-        y = (v - intrinsics.cy) / intrinsics.fy
-        return np.broadcast_to(x, (height, width)), np.broadcast_to(y[:, None], (height, width))
-    uu, vv = np.meshgrid(u, v)
-    pixels = np.stack([uu.ravel(), vv.ravel()], axis=1).reshape(-1, 1, 2)
-    normalised = cv2.undistortPoints(pixels, intrinsics.K, intrinsics.dist_coeffs)
-    normalised = normalised.reshape(height, width, 2)
-    return normalised[..., 0].copy(), normalised[..., 1].copy()
 
 
 class OrganisedCloud:
@@ -97,7 +79,7 @@ class OrganisedCloud:
         if self._points is not None:
             return self._points[rows, cols].astype(np.float64)
         z = self.z(rows, cols).astype(np.float64)
-        x_over_z, y_over_z = _rays(self.intrinsics, *self.shape)
+        x_over_z, y_over_z = pixel_rays(self.intrinsics, *self.shape)
         return np.stack([x_over_z[rows, cols] * z, y_over_z[rows, cols] * z, z], axis=-1)
 
     def xyz(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -105,7 +87,7 @@ class OrganisedCloud:
         if self._points is not None:
             return self._points[rows, cols].astype(np.float64)
         z = self.z(slice(None), slice(None))[rows, cols].astype(np.float64)
-        x_over_z, y_over_z = _rays(self.intrinsics, *self.shape)
+        x_over_z, y_over_z = pixel_rays(self.intrinsics, *self.shape)
         return np.stack([x_over_z[rows, cols] * z, y_over_z[rows, cols] * z, z], axis=1)
 
 
@@ -136,7 +118,7 @@ def select_points(
         points = np.compress(keep, stored, axis=0)
     else:
         depth = np.compress(keep, z.ravel()).astype(np.float64)
-        x_over_z, y_over_z = _rays(cloud.intrinsics, *cloud.shape)
+        x_over_z, y_over_z = pixel_rays(cloud.intrinsics, *cloud.shape)
         points = np.stack(
             [
                 np.compress(keep, x_over_z[window].ravel()) * depth,
