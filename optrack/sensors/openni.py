@@ -667,7 +667,9 @@ class OpenNISensor(LiveSensor):
             if frame is not None:
                 return frame
             remaining = deadline - time.monotonic()
-            if remaining <= 0:
+            # The binding passes whole milliseconds, and a wait of 0 ms (ONI_TIMEOUT_NONE)
+            # was seen to block for ever on Debian's OpenNI2: never ask for less than 1 ms.
+            if remaining < 0.001:
                 return None
             try:
                 ready = openni2.wait_for_any_stream(handles, remaining)
