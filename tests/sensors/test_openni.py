@@ -7,7 +7,6 @@ import subprocess
 import sys
 import sysconfig
 import textwrap
-import threading
 import time
 from pathlib import Path
 
@@ -140,19 +139,6 @@ def test_lost_sensor_without_reconnection_raises_one_sentence():
         with pytest.raises(SensorError, match="stopped .*no frame for 0.3 s.*check its cable"):
             for _ in range(5):
                 sensor.read()
-
-
-def test_close_from_another_thread_ends_a_blocked_read():
-    sensor = open_sensor("openni://Dummy")
-    sensor.read()
-    closer = threading.Timer(0.2, sensor.close)
-    closer.start()
-    count = 0
-    while sensor.read() is not None:
-        count += 1
-    closer.join()
-    assert 2 <= count <= 12
-    assert not sensor.is_open
 
 
 def test_openni_parameters_are_registered():
