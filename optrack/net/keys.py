@@ -74,6 +74,11 @@ class SiteKeys:
     def preview(self, sensor: str = "*") -> str:
         return f"{self.prefix}/preview/{sensor if sensor == '*' else check_name('sensor', sensor)}"
 
+    def command(self, node: str = "*") -> str:
+        """Where a node answers commands (a queryable): start a recording, a calibration
+        capture, a simulated operator's action."""
+        return f"{self.prefix}/command/{node if node == '*' else check_name('node', node)}"
+
     @property
     def clock(self) -> str:
         return f"{self.prefix}/clock"

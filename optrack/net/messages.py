@@ -33,6 +33,8 @@ __all__ = [
     "CalibrationMessage",
     "ClockReply",
     "ClockRequest",
+    "CommandReply",
+    "CommandRequest",
     "DestinationStatus",
     "DetectionsMessage",
     "Message",
@@ -189,6 +191,27 @@ class PreviewMessage(Message, tag="preview"):
     cloud: bytes = b""
     cloud_frame: str = "camera"
     world_T_camera: Matrix4 | None = None
+
+
+class CommandRequest(Message, tag="command"):
+    """Ask one node to act now (``action``, with ``args``); answered by a
+    :class:`CommandReply`. Commands are for acts (start or stop a recording or a
+    calibration capture, a simulated operator's move); settings go in
+    :class:`ParamsMessage`."""
+
+    action: str
+    args: dict[str, Any] = {}
+
+
+class CommandReply(Message, tag="command_reply"):
+    """A node's answer to a command: ``ok``, a sentence for the operator (why it was
+    refused, or what was done) and the action's ``result``."""
+
+    node: str
+    action: str
+    ok: bool
+    sentence: str = ""
+    result: dict[str, Any] = {}
 
 
 class ClockRequest(Message, tag="clock_request"):

@@ -17,12 +17,12 @@ import os
 import statistics
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
 from optrack.errors import UserError
 from optrack.net.bus import Bus
-from optrack.net.messages import ParamsMessage, StatusMessage
+from optrack.net.messages import CommandReply, CommandRequest, ParamsMessage, StatusMessage
 from optrack.params import ParamError, Params
 
 __all__ = ["PARENT_ENV", "Node", "RateMeter"]
@@ -99,7 +99,37 @@ class Node:
         self._closed = False
         parent = os.environ.get(PARENT_ENV)
         self._parent = int(parent) if parent and parent.isdigit() else None
+        self._commands: dict[str, Callable[[dict[str, Any]], dict[str, Any] | None]] = {}
         bus.subscribe(bus.keys.params(name), ParamsMessage, self._on_params)
+        bus.serve(bus.keys.command(name), CommandRequest, self._on_command)
+
+    # -------------------------------------------------------------- commands
+    def add_command(
+        self, action: str, handler: Callable[[dict[str, Any]], dict[str, Any] | None]
+    ) -> None:
+        """Answer ``action`` commands with ``handler(args) -> result``. It runs on the
+        bus's thread: it must return quickly (set a flag, start a thread) and be
+        thread-safe; a UserError it raises is the refusal sentence sent back."""
+        self._commands[action] = handler
+
+    def _on_command(self, request: CommandRequest) -> CommandReply:
+        handler = self._commands.get(request.action)
+        if handler is None:
+            known = ", ".join(sorted(self._commands)) or "none"
+            return CommandReply(
+                node=self.name,
+                action=request.action,
+                ok=False,
+                sentence=f"node '{self.name}' has no command '{request.action}' (it has: {known}).",
+            )
+        try:
+            result = handler(dict(request.args)) or {}
+        except UserError as error:
+            self.report_error(f"command '{request.action}' refused: {error}")
+            return CommandReply(
+                node=self.name, action=request.action, ok=False, sentence=str(error)
+            )
+        return CommandReply(node=self.name, action=request.action, ok=True, result=result)
 
     # ------------------------------------------------------------ parameters
     def _on_params(self, message: ParamsMessage, key: str) -> None:
@@ -232,3 +262,29 @@ class Node:
             self.publish_status()
         except Exception as error:
             self.log.debug("last status not published: %s", error)
+
+
+class CommandError(UserError):
+    """A command no node answered, or one a node refused."""
+
+
+def send_command(
+    bus: Bus, node: str, action: str, args: Mapping[str, Any] | None = None, timeout: float = 2.0
+) -> dict[str, Any]:
+    """Ask ``node`` to do ``action``; its result, or a :class:`CommandError` with the
+    node's sentence (or saying that no node answered)."""
+    replies = bus.query(
+        bus.keys.command(node),
+        CommandRequest(action=action, args=dict(args or {})),
+        CommandReply,
+        timeout=timeout,
+    )
+    if not replies:
+        raise CommandError(
+            f"node '{node}' did not answer the '{action}' command within {timeout:g} s; "
+            "check that it is running (Sensors dock, or `optrack run` output)."
+        )
+    reply = replies[0]
+    if not reply.ok:
+        raise CommandError(reply.sentence or f"node '{node}' refused '{action}'.")
+    return dict(reply.result)
