@@ -72,6 +72,7 @@ class BusSource(SiteSource):
         self._site_calibration = False
         self._preview_calibration = NetworkCalibration()
         self._disabled: set[tuple[str, str]] = set()
+        self._detectors: dict[str, str] = {}  # detector node -> its last state
         node_schemas()  # the stages' schemas must be registered to build their controls
         self._thread = threading.Thread(target=self._join, name="gui-bus-join", daemon=True)
         self._thread.start()
@@ -131,6 +132,8 @@ class BusSource(SiteSource):
 
     # ---------------------------------------------------------- receiving
     def _on_status(self, message: StatusMessage, key: str) -> None:
+        if message.role == "detector":
+            self._detectors[message.node] = message.state
         values = msgspec.to_builtins(message)
         now = time.monotonic()
         for destination in values.get("destinations", []):
@@ -257,6 +260,41 @@ class BusSource(SiteSource):
         else:
             self._take_out(kind, address)
             self._disabled.add((kind, address))
+
+    # Recording and playback: commands to every detector node, on a worker thread (each
+    # node may take up to recorder.command_timeout_s to answer); the answer comes back on
+    # ``command_reply`` and refusals as sentences on ``log``.
+    def detector_nodes(self) -> list[str]:
+        gone = ("stopped", "ended", "error")
+        return sorted(node for node, state in self._detectors.items() if state not in gone)
+
+    def _command(self, action: str, work: Any) -> None:
+        from optrack.runtime.node_recording import SiteControl
+
+        bus = self.bus
+        if bus is None:
+            self._refuse(action, f"Not connected to {self.describe()} yet; try again shortly.")
+            return
+
+        def run() -> None:
+            try:
+                result = work(SiteControl(bus), self.detector_nodes())
+            except UserError as error:
+                self.log.emit("error", str(error))
+                self.command_reply.emit(action, False, str(error), {})
+                return
+            self.command_reply.emit(action, True, "", result)
+
+        threading.Thread(target=run, name=f"gui-{action}", daemon=True).start()
+
+    def start_recording(self, folder: str) -> None:
+        self._command("record_start", lambda c, nodes: c.start_recording(nodes, folder))
+
+    def stop_recording(self) -> None:
+        self._command("record_stop", lambda c, nodes: c.stop_recording(nodes))
+
+    def playback(self, action: str, **args: Any) -> None:
+        self._command(action, lambda c, nodes: c.playback(nodes, action, **args))
 
     def close(self) -> None:
         with self._lock:

@@ -22,6 +22,7 @@ from app.view_params import VIEW_PARAMS
 from app.widgets.log_panel import LogPanel, QtLogHandler
 from app.widgets.outputs_panel import OutputsPanel
 from app.widgets.parameters_panel import ParametersPanel
+from app.widgets.recording_panel import RecordingOpener, RecordingPanel
 from app.widgets.sensors_panel import SensorsPanel
 from app.widgets.top_view import TopView
 from app.widgets.tracks_table import TracksTable
@@ -62,6 +63,7 @@ class MainWindow(QMainWindow):
         self.tracks_table = TracksTable()
         self.log_panel = LogPanel(max_lines=view.log_lines)
         self.outputs = OutputsPanel()
+        self.recording = RecordingPanel()
         self.docks: dict[str, QDockWidget] = {}
         left, right, bottom = (
             Qt.DockWidgetArea.LeftDockWidgetArea,
@@ -70,11 +72,13 @@ class MainWindow(QMainWindow):
         )
         self._dock("Sensors", self.sensors, left)
         self._dock("Parameters", self.parameters, left)
+        self._dock("Recording", self.recording, left)
         self._dock("Top view", self.top_view, right)
         self._dock("Tracks", self.tracks_table, right)
         self._dock("Log", self.log_panel, bottom)
         self._dock("Outputs", self.outputs, bottom)
         self.tabifyDockWidget(self.docks["Sensors"], self.docks["Parameters"])
+        self.tabifyDockWidget(self.docks["Parameters"], self.docks["Recording"])
         self.docks["Sensors"].raise_()
         self.splitDockWidget(self.docks["Top view"], self.docks["Tracks"], Qt.Orientation.Vertical)
         self.tabifyDockWidget(self.docks["Log"], self.docks["Outputs"])
@@ -108,6 +112,13 @@ class MainWindow(QMainWindow):
         self.outputs.enable_requested.connect(
             lambda kind, address, on: self.source.enable_output(kind, address, on)
         )
+        self.recording.record_requested.connect(lambda folder: self.source.start_recording(folder))
+        self.recording.stop_requested.connect(lambda: self.source.stop_recording())
+        self.recording.playback_requested.connect(
+            lambda action, args: self.source.playback(action, **args)
+        )
+        self.recording.open_requested.connect(self._ask_recording)
+        self.recording_opener = RecordingOpener(self)
         self.log_handler = QtLogHandler(logging.WARNING)
         self.log_handler.message.connect(self.log_panel.append)
         for name in ("optrack", "app"):
@@ -119,6 +130,7 @@ class MainWindow(QMainWindow):
         self._stage_reporter: dict[str, str] = {}
         self._max_depth: dict[str, float] = {}  # each sensor's detection.max_distance, m
         self.embedded_site: EmbeddedSite | None = None
+        self.wizard = None  # the calibration wizard, once opened (Calibration menu)
         self._site_stop_timeout_s = 0.0
         self._waiting_text = ""
         self._shutting_down = False
@@ -137,6 +149,10 @@ class MainWindow(QMainWindow):
         open_calibration = QAction("&Open calibration…", self)
         open_calibration.triggered.connect(self._ask_calibration)
         file_menu.addAction(open_calibration)
+        open_recording = QAction("Open &recording…", self)
+        open_recording.setToolTip("Play a recording through the embedded site (Recording dock).")
+        open_recording.triggered.connect(self._ask_recording)
+        file_menu.addAction(open_recording)
         file_menu.addSeparator()
         load = QAction("&Load parameter preset…", self)
         load.triggered.connect(self.parameters._ask_load)
@@ -152,6 +168,11 @@ class MainWindow(QMainWindow):
         view_menu = self.menuBar().addMenu("&View")
         for dock in self.docks.values():
             view_menu.addAction(dock.toggleViewAction())
+        calibration_menu = self.menuBar().addMenu("&Calibration")
+        calibrate = QAction("&Calibrate…", self)
+        calibrate.setToolTip("Calibrate the site's sensors step by step (the calibration wizard).")
+        calibrate.triggered.connect(self.open_wizard)
+        calibration_menu.addAction(calibrate)
 
     # ------------------------------------------------------------------ source
     def set_source(self, source: SiteSource) -> None:
@@ -171,6 +192,7 @@ class MainWindow(QMainWindow):
             (source.schemas, self.show_schemas),
             (source.log, self.log_panel.append),
             (source.connection, self.show_connection),
+            (source.command_reply, self.recording.set_reply),
         ]
         for signal, slot in self._connections:
             signal.connect(slot)
@@ -252,8 +274,19 @@ class MainWindow(QMainWindow):
         if path:
             self.open_calibration(path)
 
+    def open_recording(self, path: str) -> bool:
+        """Play a recording through the embedded site (restarted with its sensors), or say
+        why not (Log and Recording dock)."""
+        return self.recording_opener.open(path)
+
+    def _ask_recording(self) -> None:
+        path = QFileDialog.getExistingDirectory(self, "Open a recording (its folder)")
+        if path:
+            self.open_recording(path)
+
     def show_status(self, node: str, values: dict) -> None:
         self.sensors.set_status(node, values)
+        self.recording.set_status(node, values)
         self.outputs.set_status(node, values)
         detection = (values.get("params") or {}).get("detection") or {}
         if values.get("role") == "detector" and "max_distance" in detection:
@@ -319,11 +352,28 @@ class MainWindow(QMainWindow):
             painter.end()
         return image
 
+    def open_wizard(self):  # noqa: ANN201 - a CalibrationWizard, imported when asked for
+        """Open the calibration wizard against the window's site (its bus), or bring the open
+        one to the front; without a site the wizard's first page says so."""
+        from app.bus_source import BusSource
+        from app.wizard.wizard import CalibrationWizard
+
+        if self.wizard is not None and self.wizard.isVisible():
+            self.wizard.raise_()
+            self.wizard.activateWindow()
+            return self.wizard
+        bus = self.source.bus if isinstance(self.source, BusSource) else None
+        self.wizard = CalibrationWizard(bus, self)
+        self.wizard.show()
+        return self.wizard
+
     def shut_down(self) -> None:
         """Leave the bus and stop the embedded site; idempotent."""
         if self._shutting_down:
             return
         self._shutting_down = True
+        if self.wizard is not None:
+            self.wizard.shut_down()  # it uses the source's bus: before the source closes
         for name in ("optrack", "app"):
             logging.getLogger(name).removeHandler(self.log_handler)
         for signal, slot in self._connections:

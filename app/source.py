@@ -86,6 +86,8 @@ class SiteSource(QObject):
     * ``log(str level, str text)``: a sentence for the operator; level is
       ``info``, ``warning`` or ``error``.
     * ``connection(str description)``: the site now connected ("" when none).
+    * ``command_reply(str action, bool ok, str sentence, object result)``: the
+      answer to a recording or playback request (``result``: node -> its answer).
     """
 
     tracks = Signal(object)
@@ -97,6 +99,7 @@ class SiteSource(QObject):
     schemas = Signal(object, object)
     log = Signal(str, str)
     connection = Signal(str)
+    command_reply = Signal(str, bool, str, object)
 
     def describe(self) -> str:
         """One line for the status bar: which site this is."""
@@ -122,6 +125,21 @@ class SiteSource(QObject):
     def enable_output(self, kind: str, address: str, enabled: bool) -> None:
         verb = "enabled" if enabled else "disabled"
         self.log.emit("warning", f"{NO_SITE}: the {kind} output {address} was not {verb}.")
+
+    def start_recording(self, folder: str) -> None:
+        """Every detector node records its sensor into ``folder`` (on its own computer)."""
+        self._refuse("record_start", f"{NO_SITE}: no recording was started.")
+
+    def stop_recording(self) -> None:
+        self._refuse("record_stop", f"{NO_SITE}: there is no recording to stop.")
+
+    def playback(self, action: str, **args: Any) -> None:
+        """``action`` (pause, resume, step, speed with ``value``) on every replayed sensor."""
+        self._refuse(action, f"{NO_SITE}: there is no playback to {action}.")
+
+    def _refuse(self, action: str, sentence: str) -> None:
+        self.log.emit("warning", sentence)
+        self.command_reply.emit(action, False, sentence, {})
 
     def close(self) -> None:
         """Disconnect and release what the source holds; idempotent."""

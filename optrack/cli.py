@@ -207,7 +207,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("input", help=".pcd file, depth image, recording directory or sensor URI")
     p.add_argument("--intrinsics", help="fx,fy,cx,cy in pixels (needed for a bare .pcd)")
-    p.add_argument("--ground", help="ground plane a,b,c,d in the camera frame (default: automatic)")
+    floor = p.add_mutually_exclusive_group()
+    floor.add_argument(
+        "--ground", help="ground plane a,b,c,d in the camera frame (default: automatic)"
+    )
+    floor.add_argument(
+        "--ground-points",
+        help="three floor points 'x1,y1,z1;x2,y2,z2;x3,y3,z3' (metres, camera frame)",
+    )
+    floor.add_argument(
+        "--ground-pixels",
+        help="three floor pixels 'u1,v1;u2,v2;u3,v3' of the organised .pcd or depth image",
+    )
+    floor.add_argument(
+        "--ground-pick",
+        help="x,y,z (metres, camera frame): the segmented plane nearest this point is the floor",
+    )
     p.add_argument("--config", help="YAML parameter file")
     p.add_argument(
         "--sensor-model",
@@ -262,6 +277,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--infrared", action="store_true", help="infrared images (equalised, upsampled if small)"
     )
     q.add_argument("--out", help="also write the intrinsics to this YAML file")
+    q.add_argument(
+        "--config", help="YAML parameter file (calibration_corners, calibration_intrinsics)"
+    )
     _add_json(q)
     q = command(
         "stereo",
@@ -363,6 +381,35 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--perturb", metavar="M,DEG", help="move each sensor M metres, turn it DEG")
     q.add_argument("--seed", type=int, default=0, help="seed of the perturbation's directions")
     _add_json(q)
+    q = command(
+        "live",
+        "The calibration wizard without a window: extrinsics, floor, refinement on a running site.",
+        "optrack.calibration.live:cmd_live",
+        calibrate,
+    )
+    q.add_argument("--site", help="site name (default: the config's site.name)")
+    q.add_argument("--board", default="6x5", help="inner corners CxR (default 6x5)")
+    q.add_argument("--square", type=float, default=0.2, help="square size, m (default 0.2)")
+    q.add_argument("--out", required=True, help="calibration file to write")
+    q.add_argument("--config", help="YAML parameter file (bus, calibration_live, ...)")
+    q.add_argument(
+        "--extrinsics-seconds", type=float, default=120.0, help="longest extrinsics phase, s"
+    )
+    q.add_argument(
+        "--min-views", type=int, default=3, help="extrinsics end when every sensor has this many"
+    )
+    q.add_argument("--floor-seconds", type=float, default=60.0, help="longest floor phase, s")
+    q.add_argument(
+        "--floor-views", type=int, default=3, help="the floor phase ends at this many floor views"
+    )
+    q.add_argument(
+        "--refine-seconds",
+        type=float,
+        default=0.0,
+        help="seconds of one person walking for the refinement (0: no refinement)",
+    )
+    q.add_argument("--no-publish", action="store_true", help="save only; do not send to the nodes")
+    _add_json(q)
 
     # bench
     p = command(
@@ -392,6 +439,17 @@ def build_parser() -> argparse.ArgumentParser:
         help="UDP JSON destination (default 127.0.0.1:21234)",
     )
     p.add_argument("--config", help="YAML site configuration")
+    p.add_argument(
+        "--recording",
+        metavar="PATH",
+        help="play this recording through the pipeline (its sensors as the detector nodes)",
+    )
+    p.add_argument(
+        "--speed", type=float, default=1.0, help="--recording: times the recorded pace (0.25-4)"
+    )
+    p.add_argument(
+        "--loop", action="store_true", help="--recording: play it again at its end (else stop)"
+    )
 
     # gui
     p = command("gui", "Open the operator application.", cmd_gui)

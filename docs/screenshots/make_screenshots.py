@@ -11,6 +11,12 @@ by the application itself:
 
     QT_QPA_PLATFORM=xcb xvfb-run -a -s "-screen 0 1280x1024x24" \
         .venv/bin/optrack gui --screenshot docs/screenshots/main-window.png --quit-after 30
+
+The calibration wizard's pages (docs/screenshots/wizard-*.png) are taken
+against an embedded simulated site started here, its simulated operator
+moving the board, laying it down and walking as each page asks (several
+minutes on 2 cores); ``--wizard-only`` makes only those, ``--no-wizard``
+all the others.
 """
 
 from __future__ import annotations
@@ -52,7 +58,7 @@ def main() -> int:
     from app.main import configure_qt
 
     configure_qt()
-    app = QApplication([sys.argv[0]])
+    _app = QApplication([sys.argv[0]])
     from app.main_window import MainWindow
     from app.widgets.sensors_panel import SensorsPanel
 
@@ -62,6 +68,8 @@ def main() -> int:
         QTimer.singleShot(ms, loop.quit)
         loop.exec()
 
+    if "--wizard-only" in sys.argv[1:]:
+        return wizard_screenshots(settle)
     window = MainWindow()
     window.log_panel.append("info", "No site connected (--no-site).")
     window.show()
@@ -87,6 +95,121 @@ def main() -> int:
         panel.grab().save(str(HERE / "sensors-preview-depth.png"))
     else:
         print(f"no real data at {SHARED_DATA}: the Sensors screenshots were not made.")
+    if "--no-wizard" not in sys.argv[1:]:
+        return wizard_screenshots(settle)
+    return 0
+
+
+def wizard_screenshots(settle) -> int:  # noqa: ANN001 - settle(ms) processes Qt events
+    """Each page of the calibration wizard against an embedded simulated site, opened from
+    the main window's Calibration menu as an operator would (docs/screenshots/wizard-*.png)."""
+    import socket
+    import tempfile
+    import time
+
+    import yaml
+
+    from app.main import build_parser, choose_source
+    from app.main_window import MainWindow
+
+    def wait(condition, seconds: float, what: str) -> None:
+        end = time.monotonic() + seconds
+        while not condition():
+            if time.monotonic() > end:
+                raise SystemExit(f"the wizard screenshots stopped: {what} took over {seconds} s.")
+            settle(200)
+
+    def shot(wizard, name: str) -> None:
+        settle(1200)
+        wizard.screenshot().save(str(HERE / name))
+        print(f"wrote {HERE / name}")
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    folder = Path(tempfile.mkdtemp(prefix="optrack-wizard-"))
+    config = folder / "site.yaml"
+    # The sensors of the 'calibration' scenario, rendered live for the simulated operator.
+    uris = ",".join(f"sim://calibration/{k}?sensors=2&id=cam{k}" for k in range(2))
+    config.write_text(
+        yaml.safe_dump(
+            {
+                "bus": {"local_port": port},
+                "site": {"name": "wizard", "sensors": uris},
+                "node": {"state_dir": str(folder / "state"), "status_period_s": 0.5},
+                "outputs": {"udp": ""},
+            }
+        )
+    )
+    window = MainWindow()
+    window.set_source(choose_source(build_parser().parse_args(["--config", str(config)]), window))
+    window.show()
+    wait(lambda: window.source.connected, 120, "joining the embedded site")
+    wait(lambda: len(window.source.nodes_running("detection")) == 2, 120, "the detector nodes")
+    wizard = window.open_wizard()
+    wizard.resize(1280, 860)
+    try:
+        network = wizard.network_page
+        wait(network.isComplete, 60, "finding the sensors")
+        network.print_board(str(folder / "board.pdf"))
+        shot(wizard, "wizard-1-network.png")
+        wizard.next()
+
+        intrinsics = wizard.intrinsics_page
+        intrinsics.sensor.setCurrentIndex(0)
+        intrinsics.start_capture()
+        sensor = intrinsics.sensor.currentText()
+        from optrack.calibration.intrinsics import INTRINSICS_PARAMS
+
+        needed = int(INTRINSICS_PARAMS.create().min_views)
+        enough = lambda: intrinsics.views_seen.get(sensor, 0) >= needed  # noqa: E731
+        end = time.monotonic() + 240
+        while not enough() and time.monotonic() < end:
+            settle(500)
+        if enough():
+            intrinsics.calibrate()  # stops the capture; the tile keeps its coverage
+            wait(
+                lambda: sensor in intrinsics.results or bool(intrinsics.error.text()),
+                120,
+                "intrinsics",
+            )
+        else:
+            print(f"only {intrinsics.views_seen.get(sensor, 0)} intrinsics views in 240 s")
+            intrinsics.stop_capture()
+        shot(wizard, "wizard-2-intrinsics.png")
+        wizard.next()
+
+        extrinsics = wizard.extrinsics_page
+        try:
+            wait(extrinsics.isComplete, 600, "calibrating every sensor")
+        finally:
+            shot(wizard, "wizard-3-extrinsics.png")
+        wizard.next()
+
+        floor = wizard.floor_page
+        floor.capture_button.click()
+        wait(lambda: (wizard.last_state.floor_views if wizard.last_state else 0) >= 3, 300, "floor")
+        floor.solve_button.click()
+        wait(floor.isComplete, 180, "the solve")
+        shot(wizard, "wizard-4-floor.png")
+        wizard.next()
+
+        refinement = wizard.refinement_page
+        refinement.duration.setValue(40)
+        refinement.walk_button.click()
+        wait(lambda: refinement.report is not None or refinement.error.isVisible(), 400, "walk")
+        shot(wizard, "wizard-5-refinement.png")
+        wizard.next()
+
+        review = wizard.review_page
+        review.save_to(str(folder / "calibration.yaml"))
+        wait(lambda: review.saved is not None, 60, "saving")
+        review.export_to("openptrack", str(folder / "camera_poses.yaml"))
+        wait(lambda: "Exported" in review.done.text(), 60, "exporting")
+        shot(wizard, "wizard-6-review.png")
+    finally:
+        wizard.shut_down()
+        window.close()
     return 0
 
 

@@ -48,7 +48,17 @@ CORNER_PARAMS = register(
                 step=1,
                 unit="px",
                 help="Largest half-size of the sub-pixel corner search window (it also stays "
-                "below 40% of the corner spacing).",
+                "below subpix_window_fraction of the corner spacing).",
+            ),
+            Param(
+                "subpix_window_fraction",
+                0.4,
+                min=0.0,
+                max=2.0,
+                step=0.05,
+                help="The sub-pixel window's half-size stays below this fraction of the corner "
+                "spacing, so that it never reaches the next corner (0: always subpix_window, "
+                "as OpenCV's calibration sample).",
             ),
             Param(
                 "subpix_iterations",
@@ -213,14 +223,19 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     return np.clip(scaled, 0, 255).astype(np.uint8)
 
 
-def _subpix_window(corners: np.ndarray, board: Checkerboard, largest: int) -> int:
-    """Half-size of cornerSubPix's window: below 40% of the smallest corner spacing."""
+def _subpix_window(
+    corners: np.ndarray, board: Checkerboard, largest: int, fraction: float = 0.4
+) -> int:
+    """Half-size of cornerSubPix's window: below ``fraction`` of the smallest corner
+    spacing (``largest`` when ``fraction`` is 0)."""
+    if fraction <= 0:
+        return int(largest)
     grid = corners.reshape(board.rows, board.cols, 2)
     spacing = min(
         float(np.min(np.linalg.norm(np.diff(grid, axis=1), axis=2))),
         float(np.min(np.linalg.norm(np.diff(grid, axis=0), axis=2))),
     )
-    return int(max(2, min(largest, math.floor(0.4 * spacing))))
+    return int(max(2, min(largest, math.floor(fraction * spacing))))
 
 
 def _canonical_order(corners: np.ndarray, gray: np.ndarray, board: Checkerboard) -> np.ndarray:
@@ -308,9 +323,10 @@ def find_corners(
         float(p.subpix_epsilon),
     )
     native = (corners + 0.5) / scale - 0.5
-    window = _subpix_window(native, board, int(p.subpix_window))
+    fraction = float(p.subpix_window_fraction)
+    window = _subpix_window(native, board, int(p.subpix_window), fraction)
     if scale > 1 and window < 3:  # squares too small here: refine where they are larger
-        window = _subpix_window(corners, board, int(p.subpix_window))
+        window = _subpix_window(corners, board, int(p.subpix_window), fraction)
         larger = cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_CUBIC)
         refined = cv2.cornerSubPix(
             larger, corners.reshape(-1, 1, 2), (window, window), (-1, -1), criteria

@@ -71,15 +71,19 @@ def _board(args: argparse.Namespace) -> Checkerboard:
 def cmd_intrinsics(args: argparse.Namespace) -> int:
     """Intrinsics of one camera from chessboard images."""
     from optrack.calibration.intrinsics import calibrate_intrinsics, corners_from_images
+    from optrack.params import load_config
 
     board = _board(args)
-    found, size = corners_from_images(args.images, board, infrared=args.infrared)
+    config = load_config(args.config) if getattr(args, "config", None) else {}
+    found, size = corners_from_images(
+        args.images, board, infrared=args.infrared, params=config.get("calibration_corners")
+    )
     views = [c for c in found if c is not None]
     labels = [Path(p).name for p, c in zip(args.images, found, strict=True) if c is not None]
     missing = [Path(p).name for p, c in zip(args.images, found, strict=True) if c is None]
     if missing:
         _info(f"the {board.cols}x{board.rows} board was not found in: {', '.join(missing)}")
-    result = calibrate_intrinsics(views, board, size)
+    result = calibrate_intrinsics(views, board, size, config.get("calibration_intrinsics"))
     payload = result.as_dict(labels)
     payload["not_found"] = missing
     if args.out:
@@ -336,11 +340,7 @@ def cmd_network(args: argparse.Namespace) -> int:
     elif truth:
         errors = calibration_errors(network.world_T_camera, truth)
         payload.update(
-            {
-                k: v
-                for k, v in errors.as_dict().items()
-                if k not in ("ground_error_deg", "ground_error_m")
-            }
+            {k: v for k, v in errors.as_dict().items() if not k.startswith("ground_error")}
         )
     if args.json:
         _emit(payload)

@@ -68,6 +68,8 @@ class CalibrationErrors:
             "ground_error_m": self.ground_error_m,
             "position_error_m": dict(self.position_m),
             "rotation_error_deg": dict(self.rotation_deg),
+            "ground_error_deg_by_sensor": dict(self.ground_deg),
+            "ground_error_m_by_sensor": dict(self.ground_m),
         }
 
 

@@ -9,8 +9,9 @@ sensor (corners moved less than ``max_motion_px`` since its previous bin), so
 that sensors whose clocks disagree slightly still see the same board pose.
 
 A board lies on the floor when the depth around it (a ring beyond its printed
-border) is in the board's plane and its face looks up in the camera (within
-``floor_max_tilt_deg`` of the camera's up direction, -y).
+border) is one surface whose median is in the board's plane (noise-tolerant:
+the spread allowed follows the depth's own robust sigma) and its face looks up
+in the camera (within ``floor_max_tilt_deg`` of the camera's up direction, -y).
 """
 
 from __future__ import annotations
@@ -98,14 +99,24 @@ SESSION_PARAMS = register(
                 min=0.001,
                 max=0.5,
                 unit="m",
-                help="Depth samples this close to the board's plane count as the same surface.",
+                help="The ring's median must be this close to the board's plane (and samples "
+                "this close to the median are on one surface).",
             ),
             Param(
                 "floor_min_fraction",
                 0.6,
                 min=0.05,
                 max=1.0,
-                help="Share of valid ring samples that must be in the plane for a board on the floor.",
+                help="Share of valid ring samples that must be on one surface for a board on "
+                "the floor.",
+            ),
+            Param(
+                "floor_spread_sigmas",
+                3.0,
+                min=1.0,
+                max=10.0,
+                help="Samples within this many robust standard deviations of the ring's median "
+                "are also on one surface (depth noisier than floor_tolerance: stereo far away).",
             ),
             Param(
                 "floor_max_tilt_deg",
@@ -119,6 +130,9 @@ SESSION_PARAMS = register(
         help="Reading a recorded checkerboard session for network calibration.",
     )
 )
+
+
+MAD_TO_SIGMA = 1.4826  # median absolute deviation to the standard deviation of a normal
 
 
 class SessionError(UserError):
@@ -191,8 +205,14 @@ def board_on_floor(
     measured = rays * z[valid, None]
     # Distance behind the face, along the board's z (into the floor): the floor is at +thickness.
     behind = (measured - camera_T_board[:3, 3]) @ camera_T_board[:3, 2]
-    close = np.abs(behind - thickness) < params.floor_tolerance
-    return bool(close.mean() >= params.floor_min_fraction)
+    # One surface (most samples within a few robust sigmas of their median: noisy depth,
+    # e.g. stereo at 5 m, spreads it but keeps it centred), and that surface is the
+    # board's plane (its median within floor_tolerance of the floor).
+    centre = float(np.median(behind))
+    sigma = MAD_TO_SIGMA * float(np.median(np.abs(behind - centre)))
+    spread = max(float(params.floor_tolerance), float(params.floor_spread_sigmas) * sigma)
+    one_surface = np.mean(np.abs(behind - centre) < spread) >= params.floor_min_fraction
+    return bool(one_surface and abs(centre - thickness) < params.floor_tolerance)
 
 
 def board_from_recording(recording: Recording) -> Checkerboard | None:

@@ -17,6 +17,8 @@ frames.
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 
@@ -99,14 +101,17 @@ def window_footprint(
 ) -> tuple[int, int, int, int]:
     """The image pixels (u0, v0, u1, v1), half-open and clipped, a window covers."""
     out_w, out_h = HOG_WINDOW
-    corners = np.array([[0, 0, 1], [out_w - 1, 0, 1], [0, out_h - 1, 1], [out_w - 1, out_h - 1, 1]])
-    mapped = corners @ window_to_image.T
-    uv = mapped[:, :2] / mapped[:, 2:3]
+    h = window_to_image.tolist()  # four corners: plain floats beat small numpy arrays
+    us, vs = [], []
+    for x, y in ((0, 0), (out_w - 1, 0), (0, out_h - 1), (out_w - 1, out_h - 1)):
+        w = h[2][0] * x + h[2][1] * y + h[2][2]
+        us.append((h[0][0] * x + h[0][1] * y + h[0][2]) / w)
+        vs.append((h[1][0] * x + h[1][1] * y + h[1][2]) / w)
     rows, cols = shape
-    u0 = int(np.clip(np.floor(uv[:, 0].min()), 0, cols))
-    u1 = int(np.clip(np.ceil(uv[:, 0].max()) + 1, 0, cols))
-    v0 = int(np.clip(np.floor(uv[:, 1].min()), 0, rows))
-    v1 = int(np.clip(np.ceil(uv[:, 1].max()) + 1, 0, rows))
+    u0 = int(min(max(math.floor(min(us)), 0), cols))
+    u1 = int(min(max(math.ceil(max(us)) + 1, 0), cols))
+    v0 = int(min(max(math.floor(min(vs)), 0), rows))
+    v1 = int(min(max(math.ceil(max(vs)) + 1, 0), rows))
     return u0, v0, u1, v1
 
 

@@ -20,10 +20,18 @@ from typing import Any
 import numpy as np
 import yaml
 
-from optrack.detection.ground import parse_ground
+from optrack.detection.ground import (
+    GroundError,
+    ground_from_pixels,
+    ground_from_points,
+    parse_ground,
+    semi_automatic_ground,
+)
 from optrack.detection.params import SENSOR_MODELS, detection_params
 from optrack.detection.pipeline import PeopleDetector
+from optrack.detection.preprocessing import OrganisedCloud, select_points, voxel_grid
 from optrack.errors import UserError
+from optrack.geometry import Plane
 from optrack.params import Params, load_config
 from optrack.types import DetectionBatch, Intrinsics, RGBDFrame
 
@@ -65,6 +73,50 @@ def _intrinsics(args: argparse.Namespace, what: str, width: int, height: int) ->
     return Intrinsics.parse(args.intrinsics, width, height)
 
 
+def _numbers(text: str, option: str, groups: int, size: int, example: str) -> list[list[float]]:
+    """``groups`` groups of ``size`` numbers from ``"a,b;c,d;..."`` (an option's value)."""
+    parts = [g for g in text.split(";") if g.strip()]
+    try:
+        values = [[float(v) for v in g.replace(",", " ").split()] for g in parts]
+    except ValueError:
+        values = []
+    if len(values) != groups or any(len(v) != size for v in values):
+        raise GroundError(
+            f"{option} must be {groups} groups of {size} numbers like '{example}'; got '{text}'."
+        )
+    if not all(np.isfinite(v).all() for v in values):
+        raise GroundError(f"{option} must hold finite numbers; got '{text}'.")
+    return values
+
+
+def _ground_option(
+    args: argparse.Namespace, cloud: OrganisedCloud | None, params: Params
+) -> tuple[Plane | None, str]:
+    """The floor the operator gave (``--ground``, ``--ground-points``,
+    ``--ground-pixels`` or ``--ground-pick``) and how, or (None, "") for automatic.
+    ``cloud`` is the frame the pixels and the pick refer to."""
+    if getattr(args, "ground", None):
+        return parse_ground(args.ground), "manual"
+    if getattr(args, "ground_points", None):
+        points = _numbers(args.ground_points, "--ground-points", 3, 3, "x1,y1,z1;x2,y2,z2;x3,y3,z3")
+        return ground_from_points(*points), "points"
+    pixels_text = getattr(args, "ground_pixels", None)
+    pick_text = getattr(args, "ground_pick", None)
+    if not (pixels_text or pick_text):
+        return None, ""
+    assert cloud is not None
+    if pixels_text:
+        pixels = _numbers(pixels_text, "--ground-pixels", 3, 2, "u1,v1;u2,v2;u3,v3")
+        if any(v != round(v) for pixel in pixels for v in pixel):
+            raise GroundError(
+                f"--ground-pixels must be whole pixel numbers u,v; got '{pixels_text}'."
+            )
+        return ground_from_pixels(cloud, [(int(u), int(v)) for u, v in pixels]), "pixels"
+    (pick,) = _numbers(pick_text, "--ground-pick", 1, 3, "x,y,z")
+    points, _ = select_points(cloud, int(params.sampling_factor), float(params.max_distance))
+    return semi_automatic_ground(voxel_grid(points, float(params.voxel_size)), pick, params), "pick"
+
+
 def _detection_json(batch: DetectionBatch, camera_frame: bool) -> list[dict[str, Any]]:
     out = []
     for d in batch.detections:
@@ -90,7 +142,6 @@ def _detection_json(batch: DetectionBatch, camera_frame: bool) -> list[dict[str,
 
 def _single(args: argparse.Namespace, source: Path) -> dict[str, Any]:
     """A .pcd file or a depth image: one frame, camera-frame output."""
-    ground = parse_ground(args.ground) if args.ground else None
     if source.suffix.lower() == ".pcd":
         import open3d as o3d
 
@@ -104,7 +155,11 @@ def _single(args: argparse.Namespace, source: Path) -> dict[str, Any]:
                 "detector needs an organised cloud as the sensor saw it (WIDTH x HEIGHT pixels)."
             )
         intrinsics = _intrinsics(args, f"the cloud {source}", cloud.width, cloud.height)
-        detector = PeopleDetector(_params(args, "pcl"), sensor_id=source.stem, ground=ground)
+        params = _params(args, "pcl")
+        ground, how = _ground_option(args, OrganisedCloud(intrinsics, points=cloud.points), params)
+        detector = PeopleDetector(params, sensor_id=source.stem, ground=ground)
+        if how:
+            detector.ground.source = how
         batch = detector.process_cloud(cloud.points, intrinsics, cloud.colors)
     else:
         from optrack.io.images import read_color_image, read_depth_image
@@ -126,7 +181,11 @@ def _single(args: argparse.Namespace, source: Path) -> dict[str, Any]:
             depth_scale=scale if depth.dtype == np.uint16 else 1.0,
             color=color,
         )
-        detector = PeopleDetector(_params(args, None), sensor_id=source.stem, ground=ground)
+        params = _params(args, None)
+        ground, how = _ground_option(args, OrganisedCloud.from_frame(frame), params)
+        detector = PeopleDetector(params, sensor_id=source.stem, ground=ground)
+        if how:
+            detector.ground.source = how
         batch = detector.process(frame)
     if batch.ground is None:
         raise DetectError(
@@ -175,8 +234,8 @@ def _frames(args: argparse.Namespace) -> Iterator[tuple[RGBDFrame, Any]]:
 
 
 def _stream(args: argparse.Namespace) -> dict[str, Any]:
-    """A recording or a live sensor: frame after frame, one detector per sensor."""
-    ground = parse_ground(args.ground) if args.ground else None
+    """A recording or a live sensor: frame after frame, one detector per sensor (the
+    floor pixels or pick of a ground option refer to each sensor's first frame)."""
     detectors: dict[str, PeopleDetector] = {}
     detections: list[dict[str, Any]] = []
     times: list[float] = []
@@ -187,12 +246,16 @@ def _stream(args: argparse.Namespace) -> dict[str, Any]:
         detector = detectors.get(frame.sensor_id)
         if detector is None:
             pose = np.asarray(info.world_T_camera) if info.world_T_camera is not None else None
+            params = _params(args, info.model)
+            ground, how = _ground_option(args, OrganisedCloud.from_frame(frame), params)
             detector = PeopleDetector(
-                _params(args, info.model),
+                params,
                 sensor_id=frame.sensor_id,
                 ground=ground,
                 world_T_camera=pose,
             )
+            if how:
+                detector.ground.source = how
             detectors[frame.sensor_id] = detector
         batch = detector.process(frame)
         times.append(batch.processing_ms)
@@ -219,6 +282,8 @@ def _stream(args: argparse.Namespace) -> dict[str, Any]:
         "detections": detections,
         "ground": first,
         "grounds": grounds,
+        "ground_source": next(iter(detectors.values())).ground.source,
+        "ground_sources": {sid: d.ground.source for sid, d in detectors.items()},
         "ms": statistics.median(times),
         "frames": count,
         "sensors": sorted(detectors),

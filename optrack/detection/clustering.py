@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy import ndimage
 from scipy.signal import find_peaks
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -30,6 +31,7 @@ __all__ = [
     "euclidean_clusters",
     "head_based_subclusters",
     "person_candidates",
+    "tall_columns",
 ]
 
 
@@ -108,6 +110,38 @@ def euclidean_clusters(
     order = np.argsort(labels, kind="stable")
     starts = np.cumsum(counts) - counts
     return [order[starts[k] : starts[k] + counts[k]] for k in kept]
+
+
+def tall_columns(
+    points: np.ndarray, cell: float, max_height: float, tolerance: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which points stand in a tall column, and which others come within
+    ``tolerance`` of one (two boolean masks).
+
+    The floor (x, y) is cut into ``cell``-sized columns; a column is tall when
+    it holds a point higher than ``max_height`` (a wall, a cupboard), and it is
+    taken as solid from its lowest point up. A point comes near it when a tall
+    column within ``tolerance`` on the floor reaches down to ``tolerance``
+    above the point (SciPy's minimum filter over the grid of the tall columns'
+    lowest points).
+    """
+    n = len(points)
+    in_tall, touching = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    high = points[:, 2] > max_height
+    if not high.any():
+        return in_tall, touching
+    ij = np.floor(points[:, :2] * (1.0 / cell)).astype(np.int64)
+    ij -= ij.min(axis=0)
+    shape = tuple(ij.max(axis=0) + 1)
+    tall = np.zeros(shape, dtype=bool)
+    tall[ij[high, 0], ij[high, 1]] = True
+    in_tall = tall[ij[:, 0], ij[:, 1]]
+    bottom = np.full(shape, np.inf, dtype=np.float32)  # lowest point of each tall column
+    np.minimum.at(bottom, (ij[in_tall, 0], ij[in_tall, 1]), points[in_tall, 2])
+    size = 2 * int(np.ceil(tolerance / cell)) + 1
+    reach_down = ndimage.minimum_filter(bottom, size=size, mode="constant", cval=np.inf)
+    touching = ~in_tall & (reach_down[ij[:, 0], ij[:, 1]] <= points[:, 2] + tolerance)
+    return in_tall, touching
 
 
 def _merge_close(
@@ -207,14 +241,17 @@ def person_candidates(points: np.ndarray, params: Params) -> list[Candidate]:
     min_points, max_points = cluster_point_limits(params)
     tolerance = float(params.cluster_tolerance) * float(params.voxel_size)
     min_height, max_height = float(params.min_height), float(params.max_height)
-    # Points higher than max_height + tolerance change no kept cluster: a cluster
-    # whose top is at most max_height has all its neighbours below that, and every
-    # cluster reaching above max_height is dropped anyway. Leaving them out saves
-    # clustering walls and ceilings.
-    points = points[points[:, 2] < max_height + tolerance]
+    # Clusters reaching above max_height are dropped (PCL). Here the columns of floor
+    # holding such a point (walls, cupboards: most of the points) are left out of the
+    # clustering, and clusters that come within the tolerance of them are dropped, as
+    # they would have joined them.
+    in_tall, touching = tall_columns(points, float(params.voxel_size), max_height, tolerance)
+    rest = ~in_tall
+    points, touching = points[rest], touching[rest]
     clusters = [
         Candidate.from_points(points[idx], head_fraction)
         for idx in euclidean_clusters(points, tolerance, max(min_points, 1), max_points)
+        if not touching[idx].any()
     ]
     clusters = [c for c in clusters if c.height <= max_height]
     clusters = _merge_close(clusters, float(params.merge_distance), head_fraction)

@@ -425,15 +425,22 @@ class GroundEstimator:
         if self.params.lock_ground:
             return heights
         inliers = np.flatnonzero(np.abs(heights) < float(self.params.ground_inlier_distance))
-        if len(inliers) >= max(update_min_points(self.params), 3):
-            step = max(1, len(inliers) // FIT_POINTS)
-            try:
-                refit = Plane.fit(points[inliers[::step]]).oriented_towards((0.0, 0.0, 0.0))
-            except ValueError:
-                return heights
-            if abs(refit.d) >= MIN_CAMERA_HEIGHT:
-                self.plane = refit
+        step = max(1, len(inliers) // FIT_POINTS)
+        self.refit(points[inliers[::step]], len(inliers))
         return heights
+
+    def refit(self, floor: np.ndarray, count: int) -> None:
+        """Refit the floor to ``floor`` points (up to ``FIT_POINTS`` of this frame's
+        ``count`` floor points) unless locked or ``count`` is too few (OpenPTrack's
+        ``ground_update_min_points``)."""
+        if self.params.lock_ground or count < max(update_min_points(self.params), 3):
+            return
+        try:
+            refit = Plane.fit(floor).oriented_towards((0.0, 0.0, 0.0))
+        except ValueError:
+            return
+        if abs(refit.d) >= MIN_CAMERA_HEIGHT:
+            self.plane = refit
 
     def save(self) -> Path | None:
         """Save the current plane for this sensor (in the default store when none was

@@ -38,6 +38,7 @@ from optrack.detection.classifier import (
 )
 from optrack.detection.clustering import Candidate, person_candidates
 from optrack.detection.ground import (
+    FIT_POINTS,
     GroundEstimator,
     GroundStore,
     check_ground,
@@ -45,8 +46,14 @@ from optrack.detection.ground import (
     ground_T_camera,
 )
 from optrack.detection.params import detection_params
-from optrack.detection.preprocessing import OrganisedCloud, denoise, select_points, voxel_grid
-from optrack.geometry import Plane, invert, project, transform_points
+from optrack.detection.preprocessing import (
+    OrganisedCloud,
+    denoise,
+    select_points,
+    split_at_floor,
+    voxel_grid,
+)
+from optrack.geometry import Plane, invert, project
 from optrack.params import Params
 from optrack.types import Detection, DetectionBatch, Intrinsics, RGBDFrame
 
@@ -170,11 +177,6 @@ class PeopleDetector:
         started = time.perf_counter()
         p = self.params
         s = int(p.sampling_factor)
-        points, sampled = select_points(
-            cloud, s, float(p.max_distance), confidence, float(p.confidence_threshold)
-        )
-        if p.apply_denoising:
-            points = denoise(points, int(p.mean_k_denoising), float(p.std_dev_denoising))
         self.last_judgements = []
         frame_id = "world" if self.world_T_camera is not None else "ground"
 
@@ -190,18 +192,40 @@ class PeopleDetector:
                 processing_ms=(time.perf_counter() - started) * 1000.0,
             )
 
-        if not self.ground.ready:
-            voxels = voxel_grid(points, float(p.voxel_size))
-            if not self.ground.initialise(voxels, len(points) / max(sampled, 1)):
-                return batch([])
-        # Floor removal before the voxel grid (the same points go as after it, and the
-        # floor, most of a frame, is not voxelised), and the floor refit on them.
-        heights = self.ground.update(points)
+        top = float(p.max_height) + float(p.cluster_tolerance) * float(p.voxel_size)
+        floor_distance = float(p.ground_inlier_distance)
+        if p.apply_denoising or not self.ground.ready:
+            points, sampled = select_points(
+                cloud, s, float(p.max_distance), confidence, float(p.confidence_threshold)
+            )
+            if p.apply_denoising:
+                points = denoise(points, int(p.mean_k_denoising), float(p.std_dev_denoising))
+            if not self.ground.ready:
+                voxels = voxel_grid(points, float(p.voxel_size))
+                if not self.ground.initialise(voxels, len(points) / max(sampled, 1)):
+                    return batch([])
+            # Floor removal before the voxel grid (the same points go as after it, and
+            # the floor, most of a frame, is not voxelised), and the floor refit on them.
+            heights = self.ground.update(points)
+            above = (heights > floor_distance) & (heights < top)
+            points = np.compress(above, points, axis=0)
+        else:  # the same in one pass over the depth image, before making points
+            assert self.ground.plane is not None
+            points, floor, count = split_at_floor(
+                cloud,
+                s,
+                float(p.max_distance),
+                self.ground.plane.coefficients,
+                floor_distance,
+                top,
+                FIT_POINTS,
+                confidence,
+                float(p.confidence_threshold),
+            )
+            self.ground.refit(floor, count)
         plane = self.ground.plane
         assert plane is not None
-        top = float(p.max_height) + float(p.cluster_tolerance) * float(p.voxel_size)
-        above = (heights > float(p.ground_inlier_distance)) & (heights < top)
-        foreground = voxel_grid(np.compress(above, points, axis=0), float(p.voxel_size))
+        foreground = voxel_grid(points, float(p.voxel_size))
         if p.background_subtraction:
             if self.background.learning and self.background.learn(foreground, stamp):
                 pass  # still learning: this frame is detected without subtraction
@@ -273,7 +297,7 @@ class PeopleDetector:
         assert plane is not None
         hx, hy = candidate.head
         height = candidate.height
-        top_c, bottom_c, center_c = transform_points(
+        top_c, bottom_c, center_c = _transform(
             c_T_g, np.array([[hx, hy, height], [hx, hy, 0.0], [hx, hy, height / 2.0]])
         )
         pixels, _ = project(np.stack([top_c, bottom_c, center_c]), cloud.intrinsics)
@@ -359,7 +383,7 @@ class PeopleDetector:
         compensation = float(p.centroid_depth_compensation)
         camera_xyz = center_c * (1.0 + compensation / float(np.linalg.norm(center_c)))
         pose = self.world_T_camera if self.world_T_camera is not None else g_T_c
-        position = transform_points(pose, camera_xyz[None])[0]
+        position = _transform(pose, camera_xyz)
         detection = Detection(
             x=float(position[0]),
             y=float(position[1]),

@@ -15,7 +15,7 @@ import open3d as o3d
 from optrack.geometry import pixel_rays
 from optrack.types import Intrinsics, RGBDFrame
 
-__all__ = ["OrganisedCloud", "denoise", "select_points", "voxel_grid"]
+__all__ = ["OrganisedCloud", "denoise", "select_points", "split_at_floor", "voxel_grid"]
 
 
 class OrganisedCloud:
@@ -128,6 +128,61 @@ def select_points(
             axis=1,
         )
     return np.ascontiguousarray(points, dtype=np.float32), z.size
+
+
+def split_at_floor(
+    cloud: OrganisedCloud,
+    sampling_factor: int,
+    max_distance: float,
+    plane: tuple[float, float, float, float],
+    floor_distance: float,
+    top: float,
+    fit_points: int,
+    confidence: np.ndarray | None = None,
+    confidence_threshold: float = 0,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`select_points` and floor removal in one pass over a depth image.
+
+    A pixel's height above the floor ``plane`` (a, b, c, d, camera frame) is
+    ``z (a x/z + b y/z + c) + d``, so heights come from the depth and the pixel
+    rays before any point is made. Returns the points higher than
+    ``floor_distance`` and lower than ``top`` (Nx3 float32, camera frame), up to
+    ``fit_points`` floor points (within ``floor_distance``) evenly spread, and
+    how many floor points there were.
+    """
+    s = int(sampling_factor)
+    if s < 1:
+        raise ValueError(f"sampling_factor must be >= 1; got {sampling_factor}.")
+    if cloud.stored:
+        points, _ = select_points(cloud, s, max_distance, confidence, confidence_threshold)
+        a, b, c, d = (np.float32(v) for v in plane)
+        heights = points[:, 0] * a + points[:, 1] * b + points[:, 2] * c + d
+        floor = np.flatnonzero(np.abs(heights) < floor_distance)
+        step = max(1, len(floor) // fit_points)
+        above = (heights > floor_distance) & (heights < top)
+        return np.compress(above, points, axis=0), points[floor[::step]], len(floor)
+    window = (slice(None, None, s), slice(None, None, s))
+    z = cloud.z(*window)
+    x_over_z, y_over_z = pixel_rays(cloud.intrinsics, *cloud.shape)
+    x_over_z, y_over_z = x_over_z[window], y_over_z[window]
+    a, b, c, d = plane
+    with np.errstate(invalid="ignore"):
+        heights = z * (x_over_z * a + y_over_z * b + c).astype(np.float32) + np.float32(d)
+        keep = z <= max_distance  # NaN (no depth) compares False
+        if confidence is not None and confidence_threshold > 0:
+            keep &= confidence[window] >= confidence_threshold
+        above = keep & (heights > floor_distance) & (heights < top)
+        floor = keep & (np.abs(heights) < floor_distance)
+
+    def points_at(mask: np.ndarray | tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        depth = z[mask]
+        return np.stack([x_over_z[mask] * depth, y_over_z[mask] * depth, depth], axis=1).astype(
+            np.float32
+        )
+
+    rows, cols = np.nonzero(floor)
+    step = max(1, len(rows) // fit_points)
+    return points_at(above), points_at((rows[::step], cols[::step])), len(rows)
 
 
 def voxel_grid(points: np.ndarray, voxel_size: float) -> np.ndarray:

@@ -9,6 +9,7 @@
     optrack/<site>/status/<node>         a node's health, about once a second
     optrack/<site>/preview/<sensor>      low-rate down-sampled frames for the GUI
     optrack/<site>/clock                 the tracker's clock (a queryable)
+    optrack/<site>/board_views/<sensor>  checkerboard views while a calibration capture runs
 """
 
 from __future__ import annotations
@@ -73,6 +74,12 @@ class SiteKeys:
 
     def preview(self, sensor: str = "*") -> str:
         return f"{self.prefix}/preview/{sensor if sensor == '*' else check_name('sensor', sensor)}"
+
+    def board_views(self, sensor: str = "*") -> str:
+        """Where a detector node publishes its checkerboard views during a calibration
+        capture (:class:`~optrack.net.messages.BoardViewMessage`)."""
+        chunk = sensor if sensor == "*" else check_name("sensor", sensor)
+        return f"{self.prefix}/board_views/{chunk}"
 
     def command(self, node: str = "*") -> str:
         """Where a node answers commands (a queryable): start a recording, a calibration

@@ -30,6 +30,7 @@ from optrack.types import (
 __all__ = [
     "REJECT_REASONS",
     "WIRE_VERSION",
+    "BoardViewMessage",
     "CalibrationMessage",
     "ClockReply",
     "ClockRequest",
@@ -191,6 +192,36 @@ class PreviewMessage(Message, tag="preview"):
     cloud: bytes = b""
     cloud_frame: str = "camera"
     world_T_camera: Matrix4 | None = None
+
+
+class BoardViewMessage(Message, tag="board_view"):
+    """One frame a detector node searched for the checkerboard during a calibration
+    capture (a few per second).
+
+    ``stamp`` is the frame's capture time in tracker time; ``corners`` the
+    board's inner corners in full-resolution pixels of ``image`` (``color`` or
+    ``infrared``, whose ``intrinsics`` they are), in board order, or None when
+    the board was not found; ``on_floor`` whether the board lies on the floor
+    (the node's depth test; None when the depth is not registered to the image);
+    ``preview_jpeg`` a small JPEG of the image with the corners drawn.
+    """
+
+    sensor: str
+    stamp: float
+    phase: str
+    seq: int
+    image: str
+    intrinsics: Intrinsics
+    corners: list[tuple[float, float]] | None = None
+    on_floor: bool | None = None
+    preview_jpeg: bytes = b""
+    model: str = ""
+    search_ms: float = 0.0
+
+    def check(self) -> None:
+        _finite("board view", (self.stamp, self.search_ms))
+        if self.corners is not None:
+            _finite("board corners", (v for corner in self.corners for v in corner))
 
 
 class CommandRequest(Message, tag="command"):

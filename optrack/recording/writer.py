@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import os
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -12,6 +13,11 @@ import cv2
 import msgspec
 import numpy as np
 import yaml
+
+try:
+    import fcntl
+except ImportError:  # Windows: one writer per folder is then the caller's care
+    fcntl = None  # type: ignore[assignment]
 
 from optrack.io.files import atomic_write_text
 from optrack.params import Params
@@ -44,6 +50,7 @@ class _SensorStream:
         self.root.mkdir(parents=True, exist_ok=True)
         self.index = (self.root / INDEX).open("ab")
         self.count = 0
+        self.bytes = 0
         self.last_t = -float("inf")
 
 
@@ -52,6 +59,12 @@ class RecordingWriter:
 
     ``with RecordingWriter(out, sensors) as w: w.write(frame)``. The output
     directory must be new or empty: nothing already there is overwritten.
+
+    ``join=True`` adds these sensors to the recording being written at ``path``
+    by other writers (one take of a site: each detector node writes its own
+    sensor into the same directory); the directory may hold other sensors but
+    not these, and the manifest, rewritten atomically under a lock, lists every
+    sensor that joined and, once each writer closes, its frame count.
     """
 
     def __init__(
@@ -63,10 +76,20 @@ class RecordingWriter:
         source: str = "",
         extra: Mapping[str, Any] | None = None,
         params: Params | None = None,
+        join: bool = False,
     ) -> None:
         self.path = Path(path)
         self.params = params if params is not None else RECORDING_PARAMS.create()
-        if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
+        self._join = join
+        if join and ground_truth:
+            raise RecordingError("a joined recording cannot hold ground truth.")
+        if join and self.path.exists() and not self.path.is_dir():
+            raise RecordingError(
+                f"{self.path} is a file, not a recording directory; choose a folder."
+            )
+        if not join and (
+            self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir()))
+        ):
             raise RecordingError(
                 f"{self.path} already exists and is not an empty directory; choose a new output "
                 "directory (nothing was overwritten)."
@@ -95,7 +118,10 @@ class RecordingWriter:
             ground_truth=ground_truth,
             extra=dict(extra or {}),
         )
-        self._write_manifest()
+        if join:
+            self._merge_manifest(new=True)
+        else:
+            self._write_manifest()
         self._streams = {info.id: _SensorStream(self.path, info) for info in sensors}
         self._truth = (self.path / GROUND_TRUTH).open("ab") if ground_truth else None
         self._truth_t = -float("inf")
@@ -105,6 +131,11 @@ class RecordingWriter:
     @property
     def frame_counts(self) -> dict[str, int]:
         return {sid: stream.count for sid, stream in self._streams.items()}
+
+    @property
+    def byte_counts(self) -> dict[str, int]:
+        """Bytes of image files written so far, per sensor."""
+        return {sid: stream.bytes for sid, stream in self._streams.items()}
 
     def write(self, frame: RGBDFrame) -> None:
         """Append one frame of a declared sensor; its timestamp must not go back in time."""
@@ -168,7 +199,10 @@ class RecordingWriter:
             os.fsync(handle.fileno())
             handle.close()
         self._manifest.extra["frames"] = self.frame_counts
-        self._write_manifest()
+        if self._join:
+            self._merge_manifest(new=False)
+        else:
+            self._write_manifest()
 
     def __enter__(self) -> RecordingWriter:
         return self
@@ -184,6 +218,42 @@ class RecordingWriter:
     def _write_manifest(self) -> None:
         data = msgspec.to_builtins(self._manifest)
         atomic_write_text(self.path / MANIFEST, yaml.safe_dump(data, sort_keys=False))
+
+    def _merge_manifest(self, new: bool) -> None:
+        """join: add this writer's sensors (``new``) or frame counts to the shared manifest."""
+        mine = {info.id: info for info in self._manifest.sensors}
+        with _locked(self.path / ".manifest.lock"):
+            shared = self._manifest
+            if (self.path / MANIFEST).is_file():
+                data = yaml.safe_load((self.path / MANIFEST).read_text(encoding="utf-8"))
+                try:
+                    shared = msgspec.convert(data, Manifest)
+                except msgspec.ValidationError as error:
+                    raise RecordingError(f"{self.path / MANIFEST} is damaged ({error}).") from None
+                if shared.format != FORMAT_NAME or shared.version != FORMAT_VERSION:
+                    raise RecordingError(
+                        f"{self.path} holds another kind of recording; choose a new folder."
+                    )
+                if new:
+                    taken = sorted(set(mine) & {s.id for s in shared.sensors})
+                    if taken:
+                        raise RecordingError(
+                            f"{self.path} already holds a recording of sensor '{taken[0]}'; "
+                            "choose a new folder (nothing was overwritten)."
+                        )
+                    shared.sensors.extend(mine.values())
+            for sid in mine if new else ():
+                if (self.path / SENSORS_DIR / sid).exists():
+                    raise RecordingError(
+                        f"{self.path} already holds frames of sensor '{sid}'; choose a new "
+                        "folder (nothing was overwritten)."
+                    )
+            if not new:
+                frames = dict(shared.extra.get("frames") or {})  # type: ignore[call-overload]
+                frames.update(self.frame_counts)
+                shared.extra["frames"] = frames
+            data = msgspec.to_builtins(shared)
+            atomic_write_text(self.path / MANIFEST, yaml.safe_dump(data, sort_keys=False))
 
     def _write_image(
         self, stream: _SensorStream, kind: str, name: str, image: np.ndarray, ext: str
@@ -204,4 +274,18 @@ class RecordingWriter:
         tmp = folder / f".{name}{ext}.tmp"
         tmp.write_bytes(encoded.tobytes())
         os.replace(tmp, target)
+        stream.bytes += int(encoded.nbytes)
         return relative
+
+
+@contextlib.contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    """An exclusive advisory lock on ``path`` (several writers of one joined recording)."""
+    with path.open("a") as handle:
+        if fcntl is not None:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            if fcntl is not None:
+                fcntl.flock(handle.fileno(), fcntl.LOCK_UN)

@@ -4,12 +4,18 @@ Three Kinect v2 sensors of the simulated ``mixed`` venue, rendered once into
 a recording (cached), are played back at 30 Hz as live cameras by three
 detector node processes; the tracker node and the outputs node run as in
 ``optrack run``; a UDP socket in this process receives the OpenPTrack JSON.
-For every tracks datagram after a warm-up, the latency is its arrival time
-minus its header stamp, which is the capture instant of the newest frame
-that went into it (all clocks are this computer's). The nodes' own medians
-split it: ``detector_latency_ms`` (capture to detections published),
-``tracker_latency_ms`` (capture to tracks published), ``outputs_latency_ms``
-(capture to datagram sent). CPU use is read from
+The tracker node sends one tracks datagram per detection batch, stamped with
+the capture instant of the frame (in tracker time) whose detections it
+carries, and repeats the last one (same stamp) when no batch came for a
+period of ``smoothing.rate``. So for every datagram with a stamp not seen
+before (every frame that reached the output), after a warm-up, the latency
+is its arrival time minus its stamp: frame capture to datagram received, on
+this computer's one clock; repeats are counted (``repeat_hz``), not timed.
+The nodes' own medians split it: ``detector_wait_ms`` (capture to the start
+of detection: the frame waiting for a busy detector, and its decoding),
+``detector_processing_ms``, ``detector_latency_ms`` (capture to detections
+published), ``tracker_latency_ms`` (capture to datagram sent, measured in
+the tracker node, which also sends the outputs). CPU use is read from
 ``/proc`` for the launcher and every node process over the measured window
 (100 % is one core). Nothing is simulated faster or slower than real time:
 when the computer cannot keep up, the detectors skip frames, and ``hz``,
@@ -33,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from optrack.params import Param, Schema
+from optrack.runtime.site_params import SITE_PARAMS
 
 __all__ = ["E2E_BENCH", "bench_e2e"]
 
@@ -41,8 +48,30 @@ E2E_BENCH = Schema(
     "bench_e2e",
     [
         Param("scenario", "mixed", help="Simulated venue (three Kinect v2)."),
-        Param("venue_seconds", 10.0, min=1.0, max=600.0, unit="s", help="Recording looped."),
-        Param("warmup_s", 8.0, min=0.0, max=600.0, unit="s", help="Not measured."),
+        Param(
+            "venue_seconds",
+            SITE_PARAMS["venue_seconds"].default,
+            min=1.0,
+            max=600.0,
+            unit="s",
+            help="Recording looped (forwards and backwards; the same cache as 'optrack run').",
+        ),
+        Param(
+            "start_timeout_s",
+            120.0,
+            min=1.0,
+            max=600.0,
+            unit="s",
+            help="Longest wait for every node to report frames before the warm-up.",
+        ),
+        Param(
+            "warmup_s",
+            8.0,
+            min=0.0,
+            max=600.0,
+            unit="s",
+            help="Not measured (after every node runs).",
+        ),
         Param("seconds", 20.0, min=1.0, max=3600.0, unit="s", help="Measured window."),
     ],
     help="End-to-end latency benchmark.",
@@ -59,11 +88,27 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def _running(statuses: dict[str, Any], sensors: list[str]) -> bool:
+    """Every detector has processed frames and the tracker has reported."""
+    statuses = dict(statuses)
+    return "tracker" in statuses and all(
+        s in statuses and int(statuses[s].values.get("frames", 0)) > 0 for s in sensors
+    )
+
+
+def _people(recording: Any) -> int | None:
+    """Most people the ground truth has at one instant (None without ground truth)."""
+    if not recording.has_ground_truth:
+        return None
+    return max((len(instant.people) for instant in recording.ground_truth()), default=0)
+
+
 def _percentile(values: list[float], q: float) -> float:
     return float(np.percentile(np.asarray(values), q)) if values else float("nan")
 
 
-def bench_e2e(args: argparse.Namespace) -> int:
+def bench_e2e(args: argparse.Namespace, overrides: dict[str, dict[str, Any]] | None = None) -> int:
+    """``overrides``: stage values laid over the site's (to compare settings)."""
     from optrack.recording import Recording
     from optrack.runtime.cli import setup_logging
     from optrack.runtime.config import load_node_config
@@ -96,19 +141,23 @@ def bench_e2e(args: argparse.Namespace) -> int:
             arrivals.append((time.time(), data))
 
     with tempfile.TemporaryDirectory(prefix="optrack-bench-") as state:
-        config = load_node_config(
-            None,
-            {
-                "bus": {"local_port": hub_port},
-                "site": {
-                    "name": "bench",
-                    "sensors": ",".join(f"file://{venue}?loop=true#{s}" for s in sensors),
-                    "report_s": 0.0,
-                },
-                "node": {"state_dir": state},
-                "outputs": {"udp": f"127.0.0.1:{receiver.getsockname()[1]}"},
+        values: dict[str, dict[str, Any]] = {
+            "bus": {"local_port": hub_port},
+            "site": {
+                "name": "bench",
+                "sensors": ",".join(f"file://{venue}?loop=bounce#{s}" for s in sensors),
+                "report_s": 0.0,
             },
-        )
+            # the detectors of the embedded venue, as 'optrack run' starts them
+            "node": {
+                "state_dir": state,
+                "replay_max_age_s": float(SITE_PARAMS["venue_max_age_s"].default),
+            },
+            "outputs": {"udp": f"127.0.0.1:{receiver.getsockname()[1]}"},
+        }
+        for stage, changed in (overrides or {}).items():
+            values.setdefault(stage, {}).update(changed)
+        config = load_node_config(None, values)
         site = Site(config, headless=True)
         thread = threading.Thread(target=receive, daemon=True)
         thread.start()
@@ -122,6 +171,18 @@ def bench_e2e(args: argparse.Namespace) -> int:
         try:
             site.start()
             pids = {"launcher": os.getpid()}
+            # Every node up and processing first (imports take long on a busy computer),
+            # then the warm-up proper.
+            ready_by = time.monotonic() + float(protocol.start_timeout_s)
+            while time.monotonic() < ready_by and not _running(site.statuses, sensors):
+                site.supervise_once(time.monotonic())
+                time.sleep(0.1)
+            if not _running(site.statuses, sensors):
+                print(
+                    "optrack bench e2e: not every node was running after "
+                    f"{float(protocol.start_timeout_s):g} s; measuring anyway.",
+                    file=sys.stderr,
+                )
             warm_until = time.monotonic() + float(protocol.warmup_s)
             while time.monotonic() < warm_until:
                 site.supervise_once(time.monotonic())
@@ -152,7 +213,9 @@ def bench_e2e(args: argparse.Namespace) -> int:
             thread.join(2.0)
             receiver.close()
 
-    latencies, frames, beats, tracks_seen = [], 0, 0, 0
+    latencies, frames, beats, repeats, tracks_seen = [], 0, 0, 0, 0
+    counts: list[int] = []
+    stamps_seen: set[tuple[int, int]] = set()
     for arrived, data in arrivals:
         if not t0_wall <= arrived <= t1_wall:
             continue
@@ -163,10 +226,29 @@ def bench_e2e(args: argparse.Namespace) -> int:
             continue
         frames += 1
         tracks_seen = max(tracks_seen, len(document["tracks"]))
-        stamp = header["stamp"]["sec"] + header["stamp"]["nsec"] * 1e-9
+        counts.append(len(document["tracks"]))
+        key = (header["stamp"]["sec"], header["stamp"]["nsec"])
+        if key in stamps_seen:  # a repeat at the fixed rate: no new frame in it
+            repeats += 1
+            continue
+        stamps_seen.add(key)
+        stamp = key[0] + key[1] * 1e-9
         latencies.append((arrived - stamp) * 1000.0)
+    people = _people(recording)
+
+    def delta(node: str, value: str) -> float | None:
+        """How much a node's counter grew over the measured window, per second."""
+        if node not in statuses or node not in statuses_before:
+            return None
+        after = statuses[node].values.get(value)
+        before = statuses_before[node].values.get(value)
+        if not isinstance(after, (int, float)) or not isinstance(before, (int, float)):
+            return None
+        return (after - before) / elapsed
+
     detector_hz = [statuses[s].fps for s in sensors if s in statuses]
     detector_ms = [statuses[s].latency_ms for s in sensors if s in statuses]
+    detector_values = [statuses[s].values for s in sensors if s in statuses]
     dropped = sum(
         statuses[s].dropped - (statuses_before[s].dropped if s in statuses_before else 0)
         for s in sensors
@@ -184,13 +266,23 @@ def bench_e2e(args: argparse.Namespace) -> int:
         "hz": statistics.median(fps),
         "detector_hz": detector_hz,
         "detector_latency_ms": detector_ms,
+        "detector_frames_hz": [delta(s, "frames") for s in sensors],
+        "tracker_batches_hz": delta("tracker", "batches"),
+        "tracker_sent_hz": delta("tracker", "published"),
+        "tracker_repeats_hz": delta("tracker", "repeats"),
+        "detector_wait_ms": [v.get("wait_ms") for v in detector_values],
+        "detector_processing_ms": [v.get("processing_ms") for v in detector_values],
         "tracker_latency_ms": statuses["tracker"].latency_ms if "tracker" in statuses else None,
         "outputs_latency_ms": statuses["outputs"].latency_ms if "outputs" in statuses else None,
         "dropped_frames": dropped,
         "output_hz": frames / elapsed,
+        "repeat_hz": repeats / elapsed,
         "heartbeat_hz": beats / elapsed,
         "datagrams": frames + beats,
         "max_tracks": tracks_seen,
+        "tracks_p95": _percentile([float(c) for c in counts], 95) if counts else None,
+        "people": people,
+        "tracks_publish": str(config["node"].tracks_publish),
         "cpu_percent": sum(by_role.values()),
         "cpu_percent_by_role": by_role,
         "cpu_cores": os.cpu_count(),

@@ -36,7 +36,7 @@ __all__ = [
     "run_outputs_node",
 ]
 
-REPLAY_OPTIONS = ("id", "loop", "speed", "realtime")
+REPLAY_OPTIONS = ("id", "loop", "speed", "realtime", "paused")
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
 
@@ -94,6 +94,20 @@ def _flag(uri: str, name: str, value: str) -> bool:
     raise SensorError(f"sensor URI '{uri}': {name} must be true or false; got '{value}'.")
 
 
+def _loop_option(uri: str, value: str) -> bool | str:
+    """``loop=true|false`` (restart, off) or a mode of :data:`~optrack.runtime.replay.LOOP_MODES`."""
+    from optrack.runtime.replay import LOOP_MODES
+
+    if value.lower() in LOOP_MODES:
+        return value.lower()
+    if value.lower() in _TRUE | _FALSE:
+        return _flag(uri, "loop", value)
+    raise SensorError(
+        f"sensor URI '{uri}': loop must be true, false or one of {', '.join(LOOP_MODES)}; "
+        f"got '{value}'."
+    )
+
+
 def open_node_sensor(uri: str, config: NodeConfig, clock: Callable[[], float]) -> Sensor:
     """The sensor a detector node reads. A recording (``file://``) plays as a live camera
     on the node's clock (:class:`~optrack.runtime.replay.LiveReplay`); other URIs open
@@ -116,7 +130,8 @@ def open_node_sensor(uri: str, config: NodeConfig, clock: Callable[[], float]) -
             f"sensor URI '{uri}': a detector node plays recordings in real time, as a live "
             "camera; remove realtime=false (use 'optrack detect' to process every frame)."
         )
-    loop = _flag(uri, "loop", options["loop"]) if "loop" in options else False
+    loop = _loop_option(uri, options.get("loop", "false"))
+    paused = _flag(uri, "paused", options["paused"]) if "paused" in options else False
     try:
         speed = float(options.get("speed", "1"))
     except ValueError:
@@ -131,6 +146,7 @@ def open_node_sensor(uri: str, config: NodeConfig, clock: Callable[[], float]) -
         clock=clock,
         sensor_id=parsed.sensor_id,
         uri=uri,
+        paused=paused,
     )
     sensor.open()
     return sensor
@@ -150,6 +166,7 @@ def detection_params_for(info: SensorInfo, config: NodeConfig) -> Params:
 def cmd_node_detect(args: argparse.Namespace) -> int:
     """``optrack node detect --sensor URI --site NAME [--config FILE]``."""
     from optrack.runtime.detector_node import DetectorNode
+    from optrack.runtime.replay import LiveReplay
 
     config = load_node_config(args.config)
     check_name("site", args.site)
@@ -168,6 +185,8 @@ def cmd_node_detect(args: argparse.Namespace) -> int:
         sync = ClockSync(bus, config["clock"], clock)
         sync.measure()  # synchronise before the first frame when the tracker is there
         sync.start()
+        if isinstance(sensor, LiveReplay):
+            sensor.lock_phase(sync.offset_s)  # every replayed sensor at the same instant
         node = DetectorNode(
             bus,
             sensor,
@@ -202,18 +221,19 @@ def cmd_node_track(args: argparse.Namespace) -> int:
     bus = Bus(args.site, "tracker", config["bus"], host=host)
     tracker = outputs = None
     try:
+        if config["node"].outputs:  # in this process, fed straight from the tracker's loop
+            outputs = OutputsNode(bus, config["node"], config["outputs"], subscribe=False)
+            described = (
+                ", ".join(f"{d.kind} {d.address}" for d in outputs.outputs.status()) or "none"
+            )
+            logging.getLogger("optrack.runtime").info("outputs: %s", described)
         tracker = TrackerNode(
             bus,
             config["node"],
             CalibrationStore(state_dir(config, args.site) / "tracker"),
             live={stage: config[stage] for stage in ("tracking", "appearance", "smoothing")},
+            sinks=[outputs.send] if outputs is not None else [],
         )
-        if config["node"].outputs:
-            outputs = OutputsNode(bus, config["node"], config["outputs"])
-            described = (
-                ", ".join(f"{d.kind} {d.address}" for d in outputs.outputs.status()) or "none"
-            )
-            logging.getLogger("optrack.runtime").info("outputs: %s", described)
         if host:
             logging.getLogger("optrack.runtime").info(
                 "hosting site '%s' on tcp/127.0.0.1:%d (this computer only)",
@@ -258,10 +278,19 @@ def run_outputs_node(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    """``optrack run [--headless] [--seconds S] [--udp HOST:PORT] [--config FILE]``."""
+    """``optrack run [--headless] [--seconds S] [--udp HOST:PORT] [--config FILE]
+    [--recording PATH [--speed S] [--loop]]``."""
     from optrack.runtime.site import Site
 
     config = load_node_config(args.config)
     setup_logging("optrack run")
-    site = Site(config, udp=args.udp, headless=args.headless, seconds=args.seconds)
+    site = Site(
+        config,
+        udp=args.udp,
+        headless=args.headless,
+        seconds=args.seconds,
+        recording=getattr(args, "recording", None),
+        speed=getattr(args, "speed", 1.0),
+        loop=getattr(args, "loop", False),
+    )
     return site.run()

@@ -70,8 +70,27 @@ NODE_PARAMS = register(
             Param(
                 "outputs",
                 True,
-                help="The tracker node sends the outputs itself (off when a separate outputs "
-                "process does, as in 'optrack run').",
+                help="The tracker node sends the outputs itself, straight from its loop (off "
+                "only when a separate outputs process takes the tracks from the bus).",
+            ),
+            Param(
+                "replay_max_age_s",
+                -1.0,
+                min=-1.0,
+                max=1.0,
+                step=0.005,
+                unit="s",
+                help="A detector replaying a recording skips a frame already older than this "
+                "when it is free, and waits for the next one (decoded while waiting): lower "
+                "latency, fewer frames. Negative: always the newest frame due.",
+            ),
+            Param(
+                "tracks_publish",
+                "update",
+                choices=("update", "rate"),
+                help="When the tracker node sends tracks: 'update' after every detection batch "
+                "and, between updates, at least at smoothing.rate (lowest latency); 'rate' only "
+                "at smoothing.rate, the newest state each time.",
             ),
             Param(
                 "nice",

@@ -32,8 +32,10 @@ from optrack.net.clock import ClockSync
 from optrack.net.messages import CalibrationMessage, DetectionsMessage, Message
 from optrack.params import Params
 from optrack.recording import SensorInfo
+from optrack.runtime.calibration_capture import CalibrationCapture, SceneSwitch
 from optrack.runtime.calibration_store import CalibrationStore
 from optrack.runtime.node import Node, RateMeter
+from optrack.runtime.node_recording import NodePlayback, NodeRecorder
 from optrack.runtime.preview import make_preview
 from optrack.runtime.replay import LiveReplay
 from optrack.sensors.base import Sensor
@@ -123,6 +125,7 @@ class DetectorNode(Node):
         self._meter = RateMeter()
         self._latency = RateMeter()
         self._processing = RateMeter()
+        self._wait = RateMeter()  # capture to the start of detection (busy detector, decoding)
         self._next_preview = 0.0
         self._failure_kinds: set[str] = set()
         self._pending: NetworkCalibration | None = None
@@ -131,6 +134,15 @@ class DetectorNode(Node):
         self.detector = factory(self.info, self.world_T_camera, detection)
         self._set_streams()
         bus.subscribe(bus.keys.calibration, CalibrationMessage, self._on_calibration)
+        # The live calibration's board capture (commands calibration_start / _stop).
+        self.capture = CalibrationCapture(bus, self.info, sync, on_streams=self._need_stream)
+        self.capture.register(self.add_command)
+        self.live["calibration_capture"] = self.capture.params
+        self.scene = SceneSwitch(sensor)  # a simulated site's operator (calibration wizard)
+        self.scene.register(self.add_command)
+        # Recording and playback commands (optrack.runtime.node_recording).
+        self.recorder = NodeRecorder(self, self.info)
+        self.playback = NodePlayback(self, sensor) if isinstance(sensor, LiveReplay) else None
 
     # ------------------------------------------------------------ calibration
     def _initial_pose(self) -> np.ndarray | None:
@@ -176,18 +188,39 @@ class DetectorNode(Node):
 
     # ---------------------------------------------------------- parameters
     def on_params(self, stage: str, changed: dict[str, Any]) -> None:
-        if stage == "detection" and "hog_image" in changed:
+        if (stage == "detection" and "hog_image" in changed) or (
+            stage == "node" and "replay_max_age_s" in changed
+        ):
             self._set_streams()
+
+    def _take_scene(self) -> None:
+        sensor = self.scene.take(self.report_error)
+        if sensor is None:
+            return
+        self.sensor, self.info = sensor, sensor.info
+        self.capture.info = self.info
+        self._last_seq = None
+        self.detector = self.factory(self.info, self.world_T_camera, self.detection)
+
+    def _need_stream(self, kind: str) -> None:
+        streams = getattr(self.sensor, "streams", None)
+        if isinstance(self.sensor, LiveReplay) and streams is not None and kind not in streams:
+            self.sensor.streams = (*streams, kind)
 
     def _set_streams(self) -> None:
         if isinstance(self.sensor, LiveReplay):
             self.sensor.streams = tuple(replay_streams(self.info, str(self.detection.hog_image)))
+            age = float(self.node_params.replay_max_age_s)
+            self.sensor.max_age_s = age if age >= 0 else None
 
     # ---------------------------------------------------------------- frames
     def step(self) -> bool:
         """Process one frame; False when the sensor has ended."""
         self.apply_params()
         self._take_calibration()
+        self._take_scene()
+        if self.playback is not None and self.playback.hold():
+            return True  # paused: no frame until a step or a resume
         frame = self.sensor.read()
         if frame is None:
             return False
@@ -198,7 +231,14 @@ class DetectorNode(Node):
         if self._last_seq is not None and frame.seq > self._last_seq + 1:
             self.dropped += frame.seq - self._last_seq - 1
         self._last_seq = frame.seq
+        self.recorder.offer(frame, self.sync.to_tracker(captured))
+        if self.playback is not None:
+            self.playback.last_frame = frame.seq
+        if self.capture.offer(frame, captured):  # the board capture has this frame alone
+            self.capture.wait_ready(self._stop)
+            return True
         started = time.perf_counter()
+        self._wait.add(self.sync.clock() - captured)
         try:
             batch = self.detector.process(frame)
         except UserError as error:
@@ -271,16 +311,29 @@ class DetectorNode(Node):
                 "frames": self.frames,
                 "detections": self.detections,
                 "processing_ms": self._processing.median() * 1000.0,
+                "wait_ms": self._wait.median() * 1000.0,
                 "failures": self.failures,
                 "calibrated": self.world_T_camera is not None,
                 "calibration": self.calibration_id,
                 "synchronised": estimate is not None,
                 "model": self.info.model,
+                **self.capture.status_values(),
+                **self.recorder.status_values(),
+                **(self.playback.status_values() if self.playback is not None else {}),
             },
         }
 
+    def stop(self) -> None:
+        super().stop()
+        if self.playback is not None:
+            self.playback.release()  # a paused replay must not hold the loop
+
     def close(self) -> None:
         self.sync.stop()
+        self.capture.close()
+        closing = self.recorder.stop()  # what is queued is written, then the take closed
+        if closing is not None:
+            closing.join(float(self.recorder.params.stop_wait_s) * 4)
         try:
             self.sensor.close()
         finally:

@@ -63,6 +63,17 @@ class RateMeter:
             values = [v for _, v in self._events]
         return statistics.median(values) if values else 0.0
 
+    def percentile(self, q: float) -> float:
+        """The q-th percentile (0-100, linear interpolation) of the values in the window."""
+        with self._lock:
+            values = sorted(v for _, v in self._events)
+        if not values:
+            return 0.0
+        position = (len(values) - 1) * q / 100.0
+        below = int(position)
+        above = min(below + 1, len(values) - 1)
+        return values[below] + (values[above] - values[below]) * (position - below)
+
 
 class Node:
     """Base of the detector, tracker and outputs nodes.

@@ -1,8 +1,10 @@
 """The outputs node: tracks from the bus to UDP JSON, OSC and WebSocket.
 
-It runs inside the tracker node's process (``optrack node track``) or as its
-own process (``optrack run`` starts one: ``python -m
-optrack.runtime.outputs_node --site NAME --config FILE``). Its name on the
+It runs inside the tracker node's process (``optrack node track``, ``optrack
+run``), which hands it every tracks frame directly (:meth:`OutputsNode.send`,
+no bus hop before the datagram), or as its own process taking the tracks
+from the bus (``python -m optrack.runtime.outputs_node --site NAME --config
+FILE``; one more hop, for a computer of its own). Its name on the
 bus is ``outputs``: its status lists every destination with what was sent
 and the errors, and parameter updates on ``params/outputs`` (stage
 ``outputs``) add, change or remove destinations while it runs; a
@@ -22,6 +24,7 @@ from optrack.net.messages import TracksMessage
 from optrack.outputs.streams import Outputs
 from optrack.params import Params
 from optrack.runtime.node import Node, RateMeter
+from optrack.types import TrackBatch
 
 __all__ = ["OutputsNode", "main"]
 
@@ -39,12 +42,17 @@ class OutputsNode(Node):
         node_params: Params,
         outputs_params: Params,
         logger: logging.Logger = log,
+        subscribe: bool = True,
     ) -> None:
+        """``subscribe``: take the tracks from the bus; otherwise the caller hands every
+        frame to :meth:`send`."""
         self.outputs = Outputs(outputs_params.schema.create(outputs_params.as_dict()))
         super().__init__(bus, "outputs", node_params, {"outputs": outputs_params}, logger)
         self._meter = RateMeter()
         self._latency = RateMeter()
-        bus.subscribe(bus.keys.tracks, TracksMessage, self._on_tracks)
+        self._last_stamp: float | None = None
+        if subscribe:
+            bus.subscribe(bus.keys.tracks, TracksMessage, self._on_tracks)
         self.state = "running"
 
     def _on_params(self, message: Any, key: str) -> None:
@@ -56,10 +64,16 @@ class OutputsNode(Node):
         self.outputs.configure(changed)  # an OutputError refuses the whole update
 
     def _on_tracks(self, message: TracksMessage, key: str) -> None:
-        self.outputs.publish(message.batch)
+        self.send(message.batch)
+
+    def send(self, batch: TrackBatch) -> None:
+        """Send one tracks frame to every destination now."""
+        self.outputs.publish(batch)
         now = time.monotonic()
         self._meter.add(now=now)
-        self._latency.add(time.time() - message.batch.stamp, now)
+        if batch.stamp != self._last_stamp:  # a repeat carries no new frame
+            self._latency.add(time.time() - batch.stamp, now)
+        self._last_stamp = batch.stamp
 
     def status_fields(self) -> dict[str, Any]:
         return {

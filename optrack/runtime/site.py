@@ -2,12 +2,13 @@
 
 The launcher hosts the site's bus hub (a Zenoh router on
 ``tcp/127.0.0.1:<bus.local_port>``, loopback only), then starts as child
-processes one detector node per sensor, the tracker node and the outputs
-node, all connecting to the hub. Without ``site.sensors`` the sensors are
-the embedded venue: the simulated ``site.scenario`` (``mixed``: three
-Kinect v2, four to six people) rendered once into a cache (live ray casting
-cannot keep 3 x 30 Hz on a 2-core computer) and looped by each detector as
-a live camera.
+processes one detector node per sensor and the tracker node, which sends the
+outputs itself, all connecting to the hub. Without ``site.sensors`` the
+sensors are the embedded venue: the simulated ``site.scenario`` (``mixed``:
+three Kinect v2, four to six people) rendered once into a cache (live ray
+casting cannot keep 3 x 30 Hz on a 2-core computer; the rendering's progress
+goes to stderr and to the ``site`` status) and looped forwards and backwards
+by each detector as a live camera, every sensor at the same instant of it.
 
 It supervises the children: one that stops unexpectedly is reported (on
 stderr and in the ``site`` status on the bus) and restarted after
@@ -30,6 +31,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -57,7 +59,7 @@ class Child:
     """One node process of the site."""
 
     name: str
-    role: str  # detector, tracker, outputs, gui
+    role: str  # detector, tracker, gui (outputs: a separate outputs process)
     module: str
     args: list[str]
     process: subprocess.Popen[bytes] | None = None
@@ -100,14 +102,33 @@ def _cache_root() -> Path:
     return Path(base) / "optrack" / "venues"
 
 
-def venue_recording(scenario: str, seed: int, seconds: float, cache: Path | None = None) -> Path:
-    """The embedded venue's recording, rendered once (with a progress bar) and then reused."""
+#: How the embedded venue is cached: depth (and infrared) as PNG without deflate, colour as
+#: JPEG. Encoding is several times faster than deflated PNG (the rendering's biggest cost
+#: after ray casting), and so is decoding in the detector nodes, where it counts in every
+#: frame's latency; the files are larger (see docs/runtime.md for the measured figures).
+VENUE_FORMAT = {"color_format": "jpg", "jpeg_quality": 95, "png_compression": 0}
+
+#: ``progress(done, total, frames_per_s)`` while a venue renders.
+VenueProgress = Callable[[int, int, float], None]
+
+
+def venue_recording(
+    scenario: str,
+    seed: int,
+    seconds: float,
+    cache: Path | None = None,
+    progress: VenueProgress | None = None,
+) -> Path:
+    """The embedded venue's recording, rendered once (a progress bar on stderr, and
+    ``progress`` called as it goes) and then reused."""
     from optrack import __version__
     from optrack.recording import is_recording
+    from optrack.recording.format import RECORDING_PARAMS
     from optrack.sim.recorder import ProgressBar, write_recording
     from optrack.sim.world import Simulation
 
-    name = f"{Path(scenario).stem}-seed{seed}-{seconds:g}s-v{__version__}"
+    level = VENUE_FORMAT["png_compression"]
+    name = f"{Path(scenario).stem}-seed{seed}-{seconds:g}s-v{__version__}-png{level}"
     path = (cache or _cache_root()) / name
     done = path / ".complete"
     if done.is_file() and is_recording(path):
@@ -115,13 +136,28 @@ def venue_recording(scenario: str, seed: int, seconds: float, cache: Path | None
     sim = Simulation(scenario, seed=seed, seconds=seconds)
     total = sum(sim.frame_count(k) for k in range(len(sim.sensors)))
     log.info(
-        "rendering the venue '%s' once (%d frames; later runs reuse %s)", scenario, total, path
+        "rendering the venue '%s' once: %d frames, a few minutes on 2 cores (later runs reuse %s)",
+        scenario,
+        total,
+        path,
     )
     path.parent.mkdir(parents=True, exist_ok=True)
     scratch = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=path.parent))
     bar = ProgressBar(f"venue {sim.scenario.name}", total)
+    started = time.perf_counter()
+
+    def advance(n: int, _total: int) -> None:
+        bar.update(n)
+        if progress is not None:
+            progress(n, total, n / max(time.perf_counter() - started, 1e-9))
+
     try:
-        write_recording(sim, scratch / "recording", progress=lambda n, _total: bar.update(n))
+        write_recording(
+            sim,
+            scratch / "recording",
+            progress=advance,
+            params=RECORDING_PARAMS.create(VENUE_FORMAT),
+        )
         bar.close()
         (scratch / "recording" / ".complete").write_text(__version__ + "\n", encoding="utf-8")
         if path.exists():
@@ -129,6 +165,11 @@ def venue_recording(scenario: str, seed: int, seconds: float, cache: Path | None
         os.replace(scratch / "recording", path)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+    log.info(
+        "venue rendered in %.0f s (%.1f frames/s)",
+        time.perf_counter() - started,
+        total / max(time.perf_counter() - started, 1e-9),
+    )
     return path
 
 
@@ -141,7 +182,13 @@ class Site:
         udp: list[str] | None = None,
         headless: bool = True,
         seconds: float | None = None,
+        recording: str | None = None,
+        speed: float = 1.0,
+        loop: bool = False,
     ) -> None:
+        """``recording``: play it through the pipeline instead of ``site.sensors`` (one
+        detector node per sensor, started paused and resumed together; ``speed`` times
+        the recorded pace; ``loop`` plays it again at its end, else the site stops there)."""
         self.config = config
         self.params: Params = config["site"]
         self.name = check_name("site", str(self.params.name))
@@ -158,18 +205,54 @@ class Site:
         self._lock = threading.Lock()
         self._run_dir: Path | None = None
         self._standby: subprocess.Popen[bytes] | None = None
+        self.operator: Any = None  # the simulated operator (calibration wizard), if simulated
+        self._venue: dict[str, Any] | None = None  # rendering progress, while it lasts
+        self._venue_sensors = False  # the sensors are the embedded venue
+        self._next_venue_status = 0.0
+        self.playback = None
+        if recording is not None:
+            from optrack.runtime.node_recording import SitePlayback
+
+            self.playback = SitePlayback(recording, speed, loop)
 
     # ---------------------------------------------------------------- setup
     def sensor_uris(self) -> list[str]:
+        if self.playback is not None:
+            return self.playback.uris()
         listed = [u.strip() for u in str(self.params.sensors).split(",") if u.strip()]
         if listed:
             return listed
         path = venue_recording(
-            str(self.params.scenario), int(self.params.seed), float(self.params.venue_seconds)
+            str(self.params.scenario),
+            int(self.params.seed),
+            float(self.params.venue_seconds),
+            progress=self._rendering,
         )
+        self._venue = None
+        self._venue_sensors = True
         from optrack.recording import Recording
 
-        return [f"file://{path}?loop=true#{sid}" for sid in Recording(path).sensor_ids]
+        # bounce: played forwards then backwards, so nobody jumps when the loop turns
+        return [f"file://{path}?loop=bounce#{sid}" for sid in Recording(path).sensor_ids]
+
+    def _rendering(self, done: int, total: int, rate: float) -> None:
+        """The venue's first rendering, in the site status (at most twice a second); Ctrl-C
+        stops it."""
+        if self._stop.is_set():
+            raise SiteError(
+                "the venue's rendering was stopped before it finished; nothing was cached, "
+                "so the next 'optrack run' renders it again."
+            )
+        now = time.monotonic()
+        self._venue = {
+            "venue.frames_done": done,
+            "venue.frames_total": total,
+            "venue.frames_per_s": round(rate, 2),
+            "venue.eta_s": round((total - done) / rate, 1) if rate > 0 else -1.0,
+        }
+        if done >= total or now >= self._next_venue_status:
+            self._next_venue_status = now + 0.5
+            self.publish_status()
 
     def _write_configs(self, run_dir: Path) -> dict[str, Path]:
         """The children's config files: the values the user's file set, the hub to connect
@@ -183,12 +266,16 @@ class Site:
         common.setdefault("node", {})["state_dir"] = str(state_dir(self.config, self.name))
         common["outputs"] = self.config["outputs"].as_dict()
         paths = {}
-        for role in ("detector", "tracker", "outputs"):
+        for role in ("detector", "tracker"):
             values = {stage: dict(v) for stage, v in common.items()}
             if role == "detector":
                 values["node"]["nice"] = int(self.params.detector_nice)
-            if role == "tracker":
-                values["node"]["outputs"] = False
+                if self._venue_sensors and "replay_max_age_s" not in self.config.explicit.get(
+                    "node", {}
+                ):
+                    values["node"]["replay_max_age_s"] = float(self.params.venue_max_age_s)
+            if role == "tracker":  # the outputs in the tracker's process: no hop to the datagram
+                values["node"]["outputs"] = True
             paths[role] = run_dir / f"{role}.yaml"
             save_config(paths[role], values)
         return paths
@@ -219,14 +306,6 @@ class Site:
                 "tracker",
                 "optrack.cli",
                 ["node", "track", "--site", self.name, "--config", str(configs["tracker"])],
-            )
-        )
-        children.append(
-            Child(
-                "outputs",
-                "outputs",
-                "optrack.runtime.outputs_node",
-                ["--site", self.name, "--config", str(configs["outputs"])],
             )
         )
         if not self.headless:
@@ -281,22 +360,30 @@ class Site:
         child.state = "running"
         child.started_at = time.monotonic()
 
+    def host(self) -> None:
+        """Host the site's hub (a Zenoh router on loopback) and listen to every status."""
+        if self.hub is None:
+            self.hub = Bus(self.name, "site", self.config["bus"], host=True)
+            self.hub.subscribe(self.hub.keys.status(), StatusMessage, self._on_status)
+
     def start(self) -> None:
-        """Render/prepare the sensors, host the hub, start every node."""
+        """Host the hub, render/prepare the sensors (progress in the site status), start
+        every node."""
+        self.host()
         uris = self.sensor_uris()
-        self.hub = Bus(self.name, "site", self.config["bus"], host=True)
-        self.hub.subscribe(self.hub.keys.status(), StatusMessage, self._on_status)
         self._run_dir = Path(tempfile.mkdtemp(prefix="optrack-run-"))
         configs = self._write_configs(self._run_dir)
         self.children = self._children(uris, configs)
-        order = ("tracker", "outputs", "detector", "gui")  # the clock first
+        if self.playback is None:
+            self._attach_operator(uris)
+        order = ("tracker", "detector", "gui")  # the clock first
         for role in order:
             for child in self.children:
                 if child.role == role:
                     self._spawn(child)
         self._spawn_standby()
         log.info(
-            "site '%s' on tcp/127.0.0.1:%d: %d detector node(s), tracker, outputs (%s)",
+            "site '%s' on tcp/127.0.0.1:%d: %d detector node(s), tracker with outputs (%s)",
             self.name,
             int(self.config["bus"].local_port),
             sum(c.role == "detector" for c in self.children),
@@ -317,6 +404,17 @@ class Site:
     def _on_status(self, message: StatusMessage, key: str) -> None:
         with self._lock:
             self.statuses[message.node] = message
+
+    # ------------------------------------------------- the simulated operator
+    def _attach_operator(self, uris: list[str]) -> None:
+        """On a simulated site, answer the ``operator`` command (calibration wizard)."""
+        from optrack.runtime.calibration_capture import SimulatedOperator
+
+        assert self.hub is not None and self._run_dir is not None
+        names = [c.name for c in self.children if c.role == "detector"]
+        self.operator = SimulatedOperator.for_site(self.params, uris, names, self._run_dir)
+        if self.operator is not None:
+            self.operator.serve(self.hub)
 
     # ----------------------------------------------------------- supervision
     def supervise_once(self, now: float) -> None:
@@ -363,15 +461,23 @@ class Site:
                 self.publish_status()
 
     def status(self) -> StatusMessage:
-        values: dict[str, Any] = {}
+        values: dict[str, Any] = dict(self._venue or {})
         for child in self.children:
             values[f"state.{child.name}"] = child.state
             values[f"pid.{child.name}"] = child.pid or 0
             values[f"restarts.{child.name}"] = child.restarts
+        if self.operator is not None:
+            values.update(self.operator.status_values())
         return StatusMessage(
             node="site",
             role="site",
-            state="stopping" if self._stop.is_set() else "running",
+            state=(
+                "stopping"
+                if self._stop.is_set()
+                else "rendering"
+                if self._venue is not None
+                else "running"
+            ),
             stamp=time.time(),
             values=values,
             counters=self.hub.stats.snapshot() if self.hub is not None else {},
@@ -482,6 +588,9 @@ class Site:
                 if deadline is not None and now >= deadline:
                     break
                 self.supervise_once(now)
+                if self.playback is not None and self.hub is not None:
+                    if not self.playback.tick(self.hub, self.children, self.statuses, self._lock):
+                        break  # the recording has played to its end
                 if now >= next_status:
                     self.publish_status()
                     next_status = now + 1.0

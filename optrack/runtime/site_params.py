@@ -25,12 +25,24 @@ SITE_PARAMS = register(
             Param("seed", 0, min=0, max=2**31 - 1, step=1, help="Embedded venue: random seed."),
             Param(
                 "venue_seconds",
-                10.0,
+                6.0,
                 min=1.0,
                 max=600.0,
                 step=1.0,
                 unit="s",
-                help="Embedded venue: length of the rendered loop (rendered once, then cached).",
+                help="Embedded venue: length of the rendered recording (rendered once, then cached; "
+                "played forwards and backwards, so the loop lasts twice this).",
+            ),
+            Param(
+                "venue_max_age_s",
+                0.01,
+                min=-1.0,
+                max=1.0,
+                step=0.005,
+                unit="s",
+                help="Embedded venue: each detector's node.replay_max_age_s (a frame already "
+                "older than this when the detector is free is skipped for the next one: lower "
+                "latency, fewer frames; negative: always the newest frame).",
             ),
             Param(
                 "restart_delay_s",

@@ -1,23 +1,37 @@
-"""The tracker node: every sensor's detections in, tracks out.
+"""The tracker node: every sensor's detections in, smoothed tracks out.
 
 ``optrack node track --site NAME [--config FILE]``. It answers clock-sync
 requests (it is the site's time reference), keeps the site's calibration
 (stores what is published, answers nodes that ask for it), and feeds each
 :class:`~optrack.types.DetectionBatch` as it arrives to the tracker
 (anything with ``update(DetectionBatch, now) -> TrackBatch | None``; the
-tracker itself handles batches that arrive out of order). Each update's
-tracks go through the output smoother (moving average, tracks unseen for a
-while left out; :class:`~optrack.tracking.smoothing.OutputSmoother`) and are
-published at once on ``tracks``, stamped with the newest detection's time:
-no fixed-rate resampling, so nothing waits.
+tracker itself handles batches that arrive out of order). The tracks go
+through the output smoother (OpenPTrack's moving average; tracks unseen for
+``smoothing.drop_after`` left out;
+:class:`~optrack.tracking.smoothing.OutputSmoother`) and are sent
+(``node.tracks_publish``):
+
+- ``update`` (default): at once after every batch, stamped with the capture
+  instant of the frame whose detections it carries, and, when no batch came
+  for a period of ``smoothing.rate``, again with the same stamp (a repeat:
+  the same data, tracks unseen for too long left out). Nothing waits, and the
+  output never falls below ``smoothing.rate``.
+- ``rate``: only at ``smoothing.rate``, the newest state each time, stamped
+  with the capture instant of the newest frame in it.
+
+A tracks frame goes first to the ``sinks`` (the outputs, called in this
+loop: no bus hop before the datagram), then on the bus (``tracks``) for the
+GUI and any other listener.
 """
 
 from __future__ import annotations
 
 import collections
 import logging
+import math
 import threading
 import time
+from collections.abc import Callable, Iterable
 from typing import Any, Protocol
 
 from optrack.errors import UserError
@@ -34,6 +48,9 @@ from optrack.types import DetectionBatch, NetworkCalibration, TrackBatch
 __all__ = ["TrackerLike", "TrackerNode"]
 
 log = logging.getLogger("optrack.runtime.tracker")
+
+#: Takes every tracks frame the node sends (the outputs).
+Sink = Callable[[TrackBatch], None]
 
 
 class TrackerLike(Protocol):
@@ -55,6 +72,8 @@ class TrackerNode(Node):
         tracker: TrackerLike | None = None,
         live: dict[str, Params] | None = None,
         smoother: Any | None = None,
+        sinks: Iterable[Sink] = (),
+        clock: Callable[[], float] = time.time,
         logger: logging.Logger = log,
     ) -> None:
         from optrack.tracking import Tracker
@@ -70,20 +89,29 @@ class TrackerNode(Node):
             tracker if tracker is not None else Tracker(live["tracking"], live["appearance"])
         )
         self.smoother = smoother if smoother is not None else OutputSmoother(live["smoothing"])
+        self.smoothing = live["smoothing"]
         super().__init__(bus, "tracker", node_params, live, logger)
         self.store = store
+        self.sinks = list(sinks)
+        self.clock = clock  # the site's time reference
         self.calibration: NetworkCalibration | None = store.load()
-        self.clock_server = ClockServer(bus)
+        self.clock_server = ClockServer(bus, clock)
         self.batches = 0
         self.refused = 0
         self.published = 0
+        self.repeats = 0
         self.tracks = 0
+        self.sink_errors = 0
         self._detections: collections.deque[DetectionsMessage] = collections.deque()
         self._arrived = threading.Event()
         self._meter = RateMeter()
         self._latency = RateMeter()
         self._sensors: dict[str, RateMeter] = {}
         self._refused_sensors: set[str] = set()
+        self._sink_failures: set[str] = set()
+        self._newest = -math.inf  # capture instant of the newest frame tracked
+        self._sent_stamp: float | None = None  # stamp of the last frame sent
+        self._next_tick = time.monotonic()
         bus.subscribe(bus.keys.detections(), DetectionsMessage, self._on_detections)
         bus.subscribe(bus.keys.calibration, CalibrationMessage, self._on_calibration)
         bus.serve(bus.keys.calibration, CalibrationRequest, self._answer_calibration)
@@ -123,47 +151,100 @@ class TrackerNode(Node):
             self._refused_sensors.add(sensor)
             self.log.warning("%s (further refusals from it are only counted)", sentence)
 
+    @property
+    def period(self) -> float:
+        """Seconds between two fixed-rate frames (``smoothing.rate``)."""
+        return 1.0 / float(self.smoothing.rate)
+
+    @property
+    def on_update(self) -> bool:
+        return str(self.node_params.tracks_publish) == "update"
+
     def step(self, timeout: float = 0.1) -> int:
-        """Track every batch that arrived (waiting up to ``timeout`` for one); returns
-        how many were used."""
+        """Track every batch that arrived, waiting for one up to ``timeout`` or the next
+        fixed-rate frame; send what is due. Returns how many batches were used."""
         self.apply_params()
-        if not self._detections and not self._arrived.wait(timeout):
-            return 0
+        if not self._detections:
+            tick = self._next_tick if self._sent_stamp is not None else math.inf
+            wait = min(timeout, tick - time.monotonic())
+            if wait > 0:
+                self._arrived.wait(wait)
         self._arrived.clear()
         used = 0
         while self._detections:
-            message = self._detections.popleft()
-            batch = message.batch
-            try:
-                tracks = self.tracker.update(batch, now=time.time())
-            except UserError as error:  # e.g. detections not in the world frame
-                self._refuse(batch.sensor_id, str(error))
+            batch = self._detections.popleft().batch
+            if not self._track(batch):
                 continue
-            self.batches += 1
-            meter = self._sensors.get(batch.sensor_id)
-            if meter is None:
-                meter = self._sensors[batch.sensor_id] = RateMeter()
-            meter.add()
-            if tracks is None:  # too late: the tracker counts it
-                continue
-            self.smoother.add(tracks)
-            out = self.smoother.publish(tracks.stamp)
-            self.bus.publish(self.bus.keys.tracks, TracksMessage(batch=out))
-            self.published += 1
-            self.tracks = len(out.tracks)
-            now = time.monotonic()
-            self._meter.add(now=now)
-            self._latency.add(time.time() - batch.stamp, now)
             used += 1
+            if self.on_update:
+                self._send(batch.stamp)
+        if time.monotonic() >= self._next_tick and self._sent_stamp is not None:
+            # a fixed-rate frame: the newest state, or (update mode) a repeat of the last
+            self._send(self._newest if not self.on_update else self._sent_stamp)
+        elif used and not self.on_update and self._sent_stamp is None:
+            self._send(self._newest)  # the first frame at once, then at the rate
         self.state = "running"
         return used
+
+    def _track(self, batch: DetectionBatch) -> bool:
+        """One batch through the tracker and into the smoother; False when refused or late."""
+        try:
+            tracks = self.tracker.update(batch, now=self.clock())
+        except UserError as error:  # e.g. detections not in the world frame
+            self._refuse(batch.sensor_id, str(error))
+            return False
+        self.batches += 1
+        meter = self._sensors.get(batch.sensor_id)
+        if meter is None:
+            meter = self._sensors[batch.sensor_id] = RateMeter()
+        meter.add()
+        if tracks is None:  # too late: the tracker counts it
+            return False
+        self.smoother.add(tracks)
+        self._newest = max(self._newest, batch.stamp)
+        return True
+
+    def _send(self, stamp: float) -> None:
+        """Send the smoothed tracks now (sinks first, then the bus), stamped ``stamp``."""
+        out = self.smoother.publish(self.clock())  # tracks unseen for drop_after left out
+        out.stamp = stamp
+        fresh = stamp != self._sent_stamp
+        for sink in self.sinks:
+            try:
+                sink(out)
+            except Exception as error:  # an output's failure never stops the tracking
+                self.sink_errors += 1
+                kind = type(error).__name__
+                if kind not in self._sink_failures:
+                    self._sink_failures.add(kind)
+                    self.log.error("sending tracks failed (%s: %s)", kind, error, exc_info=error)
+        sent = self.clock()
+        self.bus.publish(self.bus.keys.tracks, TracksMessage(batch=out))
+        self._sent_stamp = stamp
+        self.published += 1
+        self.tracks = len(out.tracks)
+        now = time.monotonic()
+        if self.on_update:  # a repeat only after a period without an update
+            self._next_tick = now + self.period
+        else:  # the fixed rate; after a stall, on from now (no burst)
+            self._next_tick += self.period
+            if self._next_tick <= now:
+                self._next_tick = now + self.period
+        self._meter.add(now=now)
+        if fresh:
+            self._latency.add(sent - stamp, now)
+        else:
+            self.repeats += 1
 
     def status_fields(self) -> dict[str, Any]:
         values: dict[str, Any] = {
             "tracks": self.tracks,
             "batches": self.batches,
             "published": self.published,
+            "repeats": self.repeats,
             "refused_batches": self.refused,
+            "sink_errors": self.sink_errors,
+            "latency_p95_ms": self._latency.percentile(95) * 1000.0,
             "clock_requests": self.clock_server.requests,
             "calibration": (
                 (self.calibration.notes or self.calibration.created or "yes")
@@ -175,7 +256,7 @@ class TrackerNode(Node):
             values[f"hz.{sensor}"] = meter.rate()
         status = getattr(self.tracker, "status", None)
         if callable(status):
-            report = status(time.time())
+            report = status(self.clock())
             values["dropped_batches"] = report.dropped_batches
             values["silent_sensors"] = ",".join(report.silent_sensors)
             if report.warnings:

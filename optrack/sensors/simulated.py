@@ -13,7 +13,9 @@ The one thing a camera cannot do: :meth:`SimulatedSensor.truth` gives the
 ground truth at the last frame's capture time.
 
 URI: ``sim://SCENARIO/N?seed=0&people=5&sensors=3&model=kinect1&seconds=60
-&realtime=false&noise=false&start=1700000000.0&id=cam0`` (all optional).
+&realtime=false&noise=false&start=1700000000.0&id=cam0&hold=5`` (all optional; ``hold``:
+seconds the board operator holds the board still at each place);
+``sim:///abs/path/scenario.yaml/N`` for a scenario file.
 """
 
 from __future__ import annotations
@@ -36,6 +38,16 @@ _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
 
 
+def _operator_params(hold_seconds: float | None) -> dict | None:
+    """``hold``: how long the scenario's board operator holds the board still at each
+    place (sim_board.hold_seconds); None keeps the default."""
+    if hold_seconds is None:
+        return None
+    from optrack.sim.board import BOARD_PARAMS
+
+    return {"sim_board": BOARD_PARAMS.create({"hold_seconds": hold_seconds})}
+
+
 class SimulatedSensor(Sensor):
     """Sensor ``index`` of a simulated scenario (see the module docstring)."""
 
@@ -49,6 +61,7 @@ class SimulatedSensor(Sensor):
         sensors: int | None = None,
         sensor_model: str | None = None,
         seconds: float | None = None,
+        hold_seconds: float | None = None,
         real_time: bool = True,
         noise: bool = True,
         start_time: float | None = None,
@@ -63,6 +76,7 @@ class SimulatedSensor(Sensor):
             sensors=sensors,
             sensor_model=sensor_model,
             seconds=seconds,
+            params=_operator_params(hold_seconds),
         )
         count = len(self.simulation.sensors)
         if not 0 <= index < count:
@@ -90,7 +104,11 @@ class SimulatedSensor(Sensor):
         parsed = urllib.parse.urlsplit(text)
         if parsed.scheme != "sim":
             raise SensorError(f"'{text}' is not a sim:// URI; write sim://SCENARIO/N.")
+        # sim:///abs/path/scenario.yaml/N names a scenario file by its absolute path.
+        absolute = not parsed.netloc and parsed.path.startswith("/")
         target = (parsed.netloc + parsed.path).strip("/")
+        if absolute:
+            target = "/" + target
         scenario, _, number = target.rpartition("/")
         if not scenario or not number.isdigit():
             raise SensorError(
@@ -103,6 +121,7 @@ class SimulatedSensor(Sensor):
             "sensors",
             "model",
             "seconds",
+            "hold",
             "realtime",
             "noise",
             "start",
@@ -147,6 +166,7 @@ class SimulatedSensor(Sensor):
             sensors=number_of("sensors", int),  # type: ignore[arg-type]
             sensor_model=options.get("model"),
             seconds=number_of("seconds", float),
+            hold_seconds=number_of("hold", float),
             real_time=flag("realtime", True),
             noise=flag("noise", True),
             start_time=number_of("start", float),

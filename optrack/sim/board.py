@@ -142,6 +142,16 @@ BOARD_PARAMS = register(
                 "Largest angle between a board on the floor and a sensor.",
             ),
             Param(
+                "max_hold_tilt_deg",
+                30.0,
+                0.0,
+                80.0,
+                1.0,
+                "deg",
+                "A held board's face looks at most this far above or below the horizontal "
+                "(held steeper, its top edge would lean into the operator).",
+            ),
+            Param(
                 "wall_clearance",
                 0.5,
                 0.0,
@@ -415,10 +425,17 @@ def plan_board_steps(
             / np.linalg.norm(v.world_T_camera[:3, 3] - centers, axis=1, keepdims=True)
             for v in chosen
         )
-        horizontal = normals[:, :2] / np.maximum(
-            np.linalg.norm(normals[:, :2], axis=1, keepdims=True), 1e-9
+        flat = np.linalg.norm(normals[:, :2], axis=1, keepdims=True)
+        horizontal = normals[:, :2] / np.maximum(flat, 1e-9)
+        tilt = np.clip(
+            np.arctan2(normals[:, 2:], flat),
+            -math.radians(params.max_hold_tilt_deg),
+            math.radians(params.max_hold_tilt_deg),
         )
-        spots = centers[:, :2] - params.carry_distance * horizontal
+        normals = np.concatenate([horizontal * np.cos(tilt), np.sin(tilt)], axis=1)
+        # The operator stands behind the board and behind its top edge, which leans back.
+        lean = (board.center[1] - board.lo[1]) * np.abs(np.sin(tilt))
+        spots = centers[:, :2] - (params.carry_distance + lean) * horizontal
         usable = venue.is_free(spots, body_radius + params.spot_clearance)
         rotations = _facing_rotations(normals)
         sizes = np.stack(
@@ -443,29 +460,40 @@ def plan_board_steps(
     centers = np.column_stack([floor, np.full(len(floor), float(params.thickness))])
     rotations = _facing_rotations(np.tile([0.0, 0.0, 1.0], (len(floor), 1)))
     seen = np.stack([_square_pixels(v, rotations, centers, board, params, True) > 0 for v in views])
-    order = np.lexsort((np.arange(len(floor)), -seen.sum(axis=0)))
-    chosen_xy: list[np.ndarray] = []
-    for c in order:
-        if len(chosen_xy) >= spec.floor_placements or not seen[:, c].any():
+    # Greedy: each placement is worth 1 / (1 + placements it already has) per sensor that
+    # sees it, so the floor is shown to every sensor that can see it, not only to the
+    # best-placed ones (the low-resolution ones see the floor only near them).
+    placed = np.zeros(len(views))
+    open_ = seen.any(axis=0)
+    held = len(steps)
+    while len(steps) - held < spec.floor_placements and open_.any():
+        found = False
+        score = np.where(open_, (seen / (1.0 + placed[:, None])).sum(axis=0), -np.inf)
+        for c in np.lexsort((np.arange(len(floor)), -score)):
+            if not open_[c]:
+                break
+            open_[c] = False
+            xy = floor[c]
+            pose = make_pose(rotations[c], centers[c] - rotations[c] @ board.center)
+            outline = transform_points(pose, board.outline)
+            seeing = tuple(
+                int(k)
+                for k in np.flatnonzero(seen[:, c])
+                if _line_of_sight(static_scene, [views[k]], outline)
+            )
+            if not seeing:
+                continue
+            spot = _step_aside(venue, xy, [views[k] for k in seeing], params, body_radius)
+            if spot is None:
+                continue
+            open_ &= np.linalg.norm(floor - xy, axis=1) >= params.floor_spacing
+            placed[list(seeing)] += 1
+            heading = math.atan2(xy[1] - spot[1], xy[0] - spot[0])
+            steps.append(BoardStep("floor", pose, spot, heading, seeing))
+            found = True
             break
-        xy = floor[c]
-        if any(np.linalg.norm(xy - other) < params.floor_spacing for other in chosen_xy):
-            continue
-        pose = make_pose(rotations[c], centers[c] - rotations[c] @ board.center)
-        outline = transform_points(pose, board.outline)
-        seeing = tuple(
-            k
-            for k in np.flatnonzero(seen[:, c])
-            if _line_of_sight(static_scene, [views[k]], outline)
-        )
-        if not seeing:
-            continue
-        spot = _step_aside(venue, xy, [views[k] for k in seeing], params, body_radius)
-        if spot is None:
-            continue
-        chosen_xy.append(xy)
-        heading = math.atan2(xy[1] - spot[1], xy[0] - spot[0])
-        steps.append(BoardStep("floor", pose, spot, heading, tuple(int(k) for k in seeing)))
+        if not found:
+            break
     return steps
 
 
@@ -576,6 +604,10 @@ class Operator(Behaviour):
     def _next(self, t: float) -> None:
         self.index += 1
         self._enter("walk", t, None)
+
+    def anchored(self, crowd: Crowd, i: int, t: float) -> bool:
+        """Standing firm while raising, holding, laying or picking up the board."""
+        return not self.done and self.phase != "walk"
 
     def facing(self, crowd: Crowd, i: int, t: float) -> float | None:
         if self.done:

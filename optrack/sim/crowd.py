@@ -339,6 +339,11 @@ class Behaviour:
         """A heading to turn to while standing (None: keep the current one)."""
         return None
 
+    def anchored(self, crowd: Crowd, i: int, t: float) -> bool:
+        """True while the person stands firm where they are (handling something): no
+        social force moves them. Standing people otherwise drift away from walls."""
+        return False
+
     def wrists(self, crowd: Crowd, i: int, t: float) -> np.ndarray | None:
         """(2, 3) world points the wrists should reach, or None for a free gait."""
         return None
@@ -755,8 +760,10 @@ class Crowd:
         top = np.maximum(speeds[idx], p.still_speed) * p.max_speed_factor
         norm = np.linalg.norm(vel, axis=1)
         vel *= np.minimum(1.0, top / np.maximum(norm, 1e-9))[:, None]
+        firm = np.array([self.people[i].behaviour.anchored(self, i, t) for i in idx])
+        vel[firm] = 0.0
         pos = pos + vel * dt
-        pos = self._resolve(pos)
+        pos = np.where(firm[:, None], self.pos[idx], self._resolve(pos))
         self.pos[idx], self.vel[idx] = pos, vel
         # Body heading, gait phase and amplitude.
         speed = np.linalg.norm(vel, axis=1)

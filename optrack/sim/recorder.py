@@ -6,7 +6,7 @@ import heapq
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TextIO
 
 from optrack import __version__
@@ -59,16 +59,32 @@ def write_recording(
     noise: bool = True,
     progress: Callable[[int, int], None] | None = None,
     params: Params | None = None,
+    instants: Sequence[float] | None = None,
 ) -> dict[str, int]:
     """Render every sensor's frames in time order into a new recording at ``path``,
     with ground truth at each capture instant; returns frames per sensor.
 
     Frames are rendered in the world at their true capture time; their
     timestamps are on each sensor's own clock (offset and jitter included).
-    ``params`` are the ``recording`` stage's (image encodings).
+    ``params`` are the ``recording`` stage's (image encodings). ``instants``
+    (world seconds) keeps only each sensor's frame nearest to each of them: a
+    short recording of chosen moments (tests, quick checks).
     """
     counts = [sim.frame_count(k) for k in range(len(sim.sensors))]
+    wanted: list[list[int]] | None = None
+    if instants is not None:
+        wanted = []
+        for k, sensor in enumerate(sim.sensors):
+            chosen = {int(round((t - sensor.phase) * sensor.model.fps)) for t in instants} & set(
+                range(counts[k])
+            )
+            wanted.append(sorted(chosen))
+        counts = [len(w) for w in wanted]
     total = sum(counts)
+
+    def number(k: int, i: int) -> int:
+        return wanted[k][i] if wanted is not None else i
+
     extra = {
         "scenario": sim.scenario.name,
         "scenario_file": sim.scenario.source,
@@ -79,7 +95,9 @@ def write_recording(
         "optrack": __version__,
     }
     schedule = [
-        (sim.sensors[k].frame_time(0), k, 0) for k in range(len(sim.sensors)) if counts[k] > 0
+        (sim.sensors[k].frame_time(number(k, 0)), k, 0)
+        for k in range(len(sim.sensors))
+        if counts[k] > 0
     ]
     heapq.heapify(schedule)
     done = 0
@@ -93,14 +111,14 @@ def write_recording(
     ) as writer:
         state, state_t = None, None
         while schedule:
-            t, k, n = heapq.heappop(schedule)
+            t, k, i = heapq.heappop(schedule)
             if state_t != t:
                 state, state_t = sim.snapshot(t), t
                 writer.write_ground_truth(sim.truth(state))
-            writer.write(sim.frame(k, n, state, noise=noise))
+            writer.write(sim.frame(k, number(k, i), state, noise=noise))
             done += 1
             if progress is not None:
                 progress(done, total)
-            if n + 1 < counts[k]:
-                heapq.heappush(schedule, (sim.sensors[k].frame_time(n + 1), k, n + 1))
+            if i + 1 < counts[k]:
+                heapq.heappush(schedule, (sim.sensors[k].frame_time(number(k, i + 1)), k, i + 1))
     return writer.frame_counts

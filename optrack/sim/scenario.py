@@ -22,6 +22,7 @@ the room on the floor, x along the room's length, y along its width, z up.
         - {kind: partition, from: [-1, 0.5], to: [0.5, 0.5], height: 1.8}
       lighting: {level: 1.0}
     sensors: {count: 3, model: kinect2, height: 2.6, tilt_deg: 30}
+    # or mixed models, one per sensor: {count: 4, models: [kinect2, kinect1, stereo, sr4500]}
     people:
       count: [4, 6]               # a number, or [min, max] drawn per seed
       standing: 1
@@ -165,12 +166,17 @@ class SensorPose(_Spec):
     roll_deg: float = 0.0
 
 
+ModelName = Literal["kinect2", "kinect1", "sr4500", "stereo"]
+
+
 class SensorsSpec(_Spec):
     """Sensors placed around the room's perimeter (``count``, ``height``, ``tilt_deg``)
-    unless ``poses`` places them by hand."""
+    unless ``poses`` places them by hand. Every sensor is a ``model`` unless ``models``
+    gives one per sensor, in order (repeated when shorter than ``count``)."""
 
     count: int = 3
-    model: Literal["kinect2", "kinect1", "sr4500", "stereo"] = "kinect2"
+    model: ModelName = "kinect2"
+    models: list[ModelName] = []
     height: float = 2.6
     tilt_deg: float = 30.0
     poses: list[SensorPose] = []

@@ -226,7 +226,10 @@ class Simulation:
     ) -> list[SimSensor]:
         spec = self.scenario.sensors
         count = spec.count if count is None else count
-        name = model_name or spec.model
+        if model_name:
+            names = [model_name]
+        else:
+            names = list(spec.models) or [spec.model]
         poses: list[np.ndarray] = []
         if spec.poses and count <= len(spec.poses):
             for pose in spec.poses[:count]:
@@ -258,6 +261,7 @@ class Simulation:
         offsets = rng.uniform(-spec.clock_offset_max_s, spec.clock_offset_max_s, len(poses))
         phases = rng.random(len(poses))
         for k, pose in enumerate(poses):
+            name = names[k % len(names)]
             model_type = MODELS[name]
             model = model_type(params.get(model_type.schema.stage))
             sensors.append(

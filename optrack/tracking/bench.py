@@ -30,6 +30,7 @@ from typing import Any
 import msgspec
 import numpy as np
 
+from optrack.errors import UserError
 from optrack.evaluation.clear_mot import ClearMot, MotScore
 from optrack.evaluation.replay import replay
 from optrack.evaluation.synthetic import SceneTruth, crowd_scene, render
@@ -37,13 +38,24 @@ from optrack.tracking.params import TRACKING_PARAMS
 from optrack.tracking.tracker import Tracker
 from optrack.types import DetectionBatch
 
-__all__ = ["BenchStream", "bench_cache", "cmd_bench_tracking", "run_norfair", "run_ours"]
+__all__ = [
+    "BenchError",
+    "BenchStream",
+    "bench_cache",
+    "cmd_bench_tracking",
+    "run_norfair",
+    "run_ours",
+]
 
 #: norfair settings searched (distance m, hit counter and delay in seconds of updates)
 NORFAIR_DISTANCES = (0.4, 0.7, 1.0)
 NORFAIR_MEMORY_S = (0.3, 1.0)
 NORFAIR_DELAY_S = (0.0, 0.1)
 NO_THRESHOLD = -100.0  # norfair's detection_threshold that keeps every detection
+
+
+class BenchError(UserError):
+    """A bench setting that cannot be honoured."""
 
 
 @dataclasses.dataclass
@@ -58,6 +70,7 @@ class BenchStream:
     ids: list[np.ndarray]
     xy: list[np.ndarray]
     counted: list[np.ndarray]
+    detections: str | None = None  # digest of the code that made cached detections
 
     @property
     def updates_per_second(self) -> float:
@@ -178,8 +191,14 @@ SIM_SCENES = (
 
 def _source_digest() -> str:
     """A short digest of the simulator's and the detector's code: cached detections are
-    made again whenever either changes."""
+    made again whenever either changes, unless $OPTRACK_BENCH_DETECTIONS names the digest
+    of detections already cached (to compare trackers on the same detections while the
+    detector's code changes)."""
     import hashlib
+
+    pinned = os.environ.get("OPTRACK_BENCH_DETECTIONS")
+    if pinned:
+        return pinned
 
     import optrack.detection
     import optrack.sim
@@ -201,10 +220,16 @@ def _sim_stream(scenario: str, sensors: int, seconds: float, seed: int) -> Bench
         from optrack.sim.world import Simulation
     except ImportError:
         return None
-    key = f"{scenario}-{sensors}s-{seconds:g}-seed{seed}-{_source_digest()}"
+    digest = _source_digest()
+    key = f"{scenario}-{sensors}s-{seconds:g}-seed{seed}-{digest}"
     folder = bench_cache() / key
     batches_file = folder / "batches.msgpack"
     recording_dir = folder / "recording"
+    if os.environ.get("OPTRACK_BENCH_DETECTIONS") and not batches_file.is_file():
+        raise BenchError(
+            f"no detections are cached in {folder} (OPTRACK_BENCH_DETECTIONS={digest}); "
+            f"name a digest that ends a folder name in {bench_cache()}, or unset it."
+        )
     if not batches_file.is_file():
         folder.mkdir(parents=True, exist_ok=True)
         if not (recording_dir / "manifest.yaml").is_file():
@@ -229,6 +254,7 @@ def _sim_stream(scenario: str, sensors: int, seconds: float, seed: int) -> Bench
         truth.ids,
         truth.xy,
         counted,
+        digest,
     )
 
 
@@ -280,6 +306,7 @@ def _compare(
             "sensors": stream.sensors,
             "frames": ours.frames,
             "objects": ours.objects,
+            **({"detections": stream.detections} if stream.detections else {}),
             "ours": {
                 "mota": round(ours.mota, 4),
                 "idsw": ours.idsw,

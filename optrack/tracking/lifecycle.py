@@ -1,7 +1,9 @@
 """Track life-cycle (Munaro 2012 section 5.4; OpenPTrack's ``Tracker::updateLostTracks``).
 
 A track is born NEW from a detection no track took (with enough confidence),
-is validated after ``detections_to_validate`` detections that confident, becomes NORMAL
+is validated after ``detections_to_validate`` detections that confident (or, born
+from weaker detections, after ``weak_detections_to_validate`` detections in a
+row: seen weakly but steadily, like a person behind furniture), becomes NORMAL
 ``sec_remain_new`` after its birth, MISSING when no sensor has detected it for
 ``sec_before_missing``, and is deleted ``sec_before_old`` after its last
 detection. A track never validated is deleted as fake ``sec_before_fake``
@@ -25,6 +27,7 @@ __all__ = [
     "TrackState",
     "advance",
     "on_detected",
+    "on_missed",
     "record_position",
     "reference_position",
     "seen_near",
@@ -53,6 +56,8 @@ class TrackState:
     validated: bool = False
     detections: int = 0
     confident_detections: int = 0  # with at least min_confidence_initialization
+    #: per sensor, detections in a row (reset by a frame of that sensor that misses the track)
+    runs: dict[str, int] = dataclasses.field(default_factory=dict)
     streak: int = 0  # detections since the last gap of sec_before_missing
     confirmed: float = -np.inf  # last detection of a run long enough to trust
     sensors: dict[str, float] = dataclasses.field(default_factory=dict)
@@ -73,18 +78,29 @@ def on_detected(
 ) -> None:
     """A detection (stamped t, possibly late) was associated to the track."""
     track.detections += 1
-    if confidence >= params.min_confidence_initialization:
+    confident = confidence >= params.min_confidence_initialization
+    if confident:
         track.confident_detections += 1
     if t - track.last_detection >= params.sec_before_missing:
         track.streak = 0  # seen again after a gap: a new run of detections
+        track.runs.clear()  # (also of a sensor gone silent meanwhile)
     track.streak += 1
     track.last_detection = max(track.last_detection, t)
     track.sensors[sensor] = max(track.sensors.get(sensor, t), t)
+    weak_floor = min(
+        params.min_confidence_initialization, params.min_confidence_weak_initialization
+    )
+    if confidence >= weak_floor:
+        track.runs[sensor] = track.runs.get(sensor, 0) + 1
     track.confidence = confidence
     track.height += (height - track.height) / track.detections
-    if not track.validated and track.confident_detections >= params.detections_to_validate:
+    steady = sum(track.runs.values()) >= params.weak_detections_to_validate
+    if not track.validated and (
+        track.confident_detections >= params.detections_to_validate or steady
+    ):
         track.validated = True
-    if track.streak >= params.detections_to_validate or not track.validated:
+    # found again after a gap: seen once as many detections in a row as a new track needs
+    if track.streak >= params.detections_to_validate or steady or not track.validated:
         track.confirmed = track.last_detection
     if track.confirmed >= track.last_detection:
         track.status = (
@@ -92,6 +108,14 @@ def on_detected(
             if track.last_detection - track.born >= params.sec_remain_new
             else TrackStatus.NEW
         )
+
+
+def on_missed(track: TrackState, sensor: str, t: float) -> None:
+    """A frame of ``sensor`` stamped t did not detect the track: the sensor's run of
+    detections in a row starts over (only frames after its last detection of the track
+    count; a late frame does not)."""
+    if track.runs.get(sensor) and track.sensors[sensor] < t:
+        track.runs[sensor] = 0
 
 
 def advance(track: TrackState, now: float, params: Any) -> Fate:

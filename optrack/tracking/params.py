@@ -154,6 +154,18 @@ TRACKING_PARAMS = register(
                 "this confidence (HOG margin; the detector sends from about -1.75).",
             ),
             Param(
+                "min_confidence_weak_initialization",
+                -3.5,
+                min=-100.0,
+                max=100.0,
+                step=0.1,
+                help="A detection left over by association that is below "
+                "min_confidence_initialization but at least this confident starts a track that "
+                "only weak_detections_to_validate detections in a row validate (a person half "
+                "hidden behind furniture is seen weakly but steadily; a false alarm flickers). "
+                "Just below the detectors' own thresholds (Kinect -3.0, SR4500 -3.25).",
+            ),
+            Param(
                 "detections_to_validate",
                 3,
                 min=1,
@@ -161,6 +173,15 @@ TRACKING_PARAMS = register(
                 step=1,
                 help="Detections with at least min_confidence_initialization a new track needs "
                 "before it is validated (published).",
+            ),
+            Param(
+                "weak_detections_to_validate",
+                10,
+                min=1,
+                max=1000,
+                step=1,
+                help="A track needs this many detections in a row (no frame of a sensor that saw "
+                "it missing it) to be validated on weak detections alone.",
             ),
             Param(
                 "sec_before_fake",

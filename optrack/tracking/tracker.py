@@ -49,6 +49,7 @@ from optrack.tracking.lifecycle import (
     TrackState,
     advance,
     on_detected,
+    on_missed,
     record_position,
     reference_position,
     seen_near,
@@ -189,11 +190,16 @@ class Tracker:
 
         self._advance(self.clock)  # statuses at this time; tracks whose time is up go
         taken = np.zeros(m, dtype=bool)
+        explained = np.zeros(m, dtype=bool)
         if self.tracks and m:
-            taken = self._associate(
+            taken, explained = self._associate(
                 t, batch.sensor_id, detections, positions, confidence, position_var, features
             )
-        self._start_tracks(t, batch.sensor_id, detections, positions, position_var, features, taken)
+        self._start_tracks(
+            t, batch.sensor_id, detections, positions, position_var, features, taken, explained
+        )
+        for track in self.tracks:
+            on_missed(track, batch.sensor_id, t)
         if appearance and features is not None:
             self._recover_identities(t)
         return self.output(self.clock)
@@ -207,8 +213,9 @@ class Tracker:
         confidence: np.ndarray,
         position_var: np.ndarray,
         features: np.ndarray | None,
-    ) -> np.ndarray:
-        """Steps 1-3 and the updates; returns which detections were taken."""
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Steps 1-3 and the updates; returns which detections were taken, and which lie
+        in some track's gates (a person already tracked could explain them)."""
         p = self.p
         tracks = self.tracks
         n, m = len(tracks), len(detections)
@@ -235,7 +242,9 @@ class Tracker:
         allowed = (d2 <= self.gate) & within_reach(
             positions, last_seen, unseen, p.max_speed, p.min_reach
         )
-        # a detection too weak to start a track cannot revive a missing one either
+        # a weak detection some track (even a lost one) could take is no new person
+        explained = allowed.any(axis=0)
+        # a detection too weak to start a confident track cannot revive a missing one
         missing = np.array([t - tr.confirmed for tr in tracks]) >= p.sec_before_missing
         weak = confidence < p.min_confidence_initialization
         allowed &= ~(missing[:, None] & weak[None, :])
@@ -275,7 +284,7 @@ class Tracker:
             for j in recovered:
                 taken[j] = True
             self._learn(t, pairs, detections, features)
-        return taken
+        return taken, explained
 
     def _take(
         self,
@@ -455,10 +464,18 @@ class Tracker:
         position_var: np.ndarray,
         features: np.ndarray | None,
         taken: np.ndarray,
+        explained: np.ndarray,
     ) -> None:
         p = self.p
+        # confident detections start tracks that detections_to_validate such detections
+        # validate; weaker ones, tracks that weak_detections_to_validate in a row validate,
+        # and only where no track could explain them (a weak second detection of someone
+        # tracked, from another sensor or a split silhouette, is not a new person)
+        floor = min(p.min_confidence_initialization, p.min_confidence_weak_initialization)
         for j, d in enumerate(detections):
-            if taken[j] or d.confidence < p.min_confidence_initialization:
+            if taken[j] or d.confidence < floor:
+                continue
+            if d.confidence < p.min_confidence_initialization and explained[j]:
                 continue
             x, P = self._initial_state(positions[j], position_var[j])
             track = TrackState(

@@ -13,6 +13,7 @@ from optrack.detection.clustering import (
     euclidean_clusters,
     head_based_subclusters,
     person_candidates,
+    tall_columns,
 )
 
 PARAMS = detection_params()
@@ -88,6 +89,25 @@ def test_a_person_leaning_on_a_tall_cupboard_is_dropped_with_it_as_pcl_does():
     cupboard = block(0.22, 1.0, 3.0, 3.5, 0.1, 2.6)
     leaning = person(0.0, 3.2)
     assert person_candidates(np.concatenate([cupboard, leaning]), PARAMS) == []
+
+
+def test_a_person_clear_of_a_wall_is_found_and_one_against_it_is_not():
+    wall = block(1.0, 1.05, 0.0, 6.0, 0.1, 2.4)  # taller than max_height: never clustered
+    clear = person(0.6, 2.0)  # shoulders 0.18 m from the wall: beyond the tolerance
+    against = person(0.75, 4.0)  # shoulders 0.03 m from it: joined to it, as PCL would
+    candidates = person_candidates(np.concatenate([wall, clear, against]), PARAMS)
+    assert [tuple(np.round(c.head, 1)) for c in candidates] == [(0.6, 2.0)]
+
+
+def test_tall_columns_mark_walls_and_what_touches_them():
+    wall = block(1.0, 1.05, 0.0, 1.0, 0.1, 2.4)
+    touching = block(0.9, 0.95, 0.4, 0.6, 0.5, 1.0)  # 0.05 m from the wall
+    apart = block(0.5, 0.6, 0.4, 0.6, 0.5, 1.0)  # 0.4 m from it
+    points = np.concatenate([wall, touching, apart])
+    in_tall, near = tall_columns(points, 0.06, 2.3, 0.12)
+    n_wall, n_touching = len(wall), len(touching)
+    assert in_tall[:n_wall].all() and not in_tall[n_wall:].any()
+    assert near[n_wall : n_wall + n_touching].all() and not near[n_wall + n_touching :].any()
 
 
 def test_width_limits_apply():

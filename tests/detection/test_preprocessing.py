@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from optrack.detection.preprocessing import OrganisedCloud, denoise, select_points, voxel_grid
+from optrack.detection.preprocessing import (
+    OrganisedCloud,
+    denoise,
+    select_points,
+    split_at_floor,
+    voxel_grid,
+)
 from optrack.geometry import backproject, backproject_points
 from optrack.io.images import read_depth_image
 from optrack.io.pcd import read_pcd
@@ -31,6 +37,27 @@ def test_depth_image_points_match_pcls_cloud_of_the_same_frame(grabber):
     np.testing.assert_allclose(grid[valid], reference[valid], atol=1e-5)
     window = cloud.grid(slice(100, 300, 4), slice(50, 500, 4))
     np.testing.assert_allclose(window, grid[100:300:4, 50:500:4], atol=1e-12, equal_nan=True)
+
+
+@pytest.mark.parametrize("stored", [False, True])
+def test_floor_split_in_one_pass_keeps_the_points_between_floor_and_top(grabber, stored):
+    depth, reference = grabber
+    cloud = (
+        OrganisedCloud(GRABBER, points=reference)
+        if stored
+        else OrganisedCloud(GRABBER, depth=depth, depth_scale=0.001)
+    )
+    plane = (0.065, -0.691, -0.720, 0.712)  # this frame's floor, normal up (camera frame)
+    points, _ = select_points(cloud, 2, 15.0)
+    heights = points.astype(np.float64) @ np.array(plane[:3]) + plane[3]
+    above, floor, count = split_at_floor(cloud, 2, 15.0, plane, 0.05, 0.5, 100)
+    expected = points[(heights > 0.05) & (heights < 0.5)]
+    assert 0 < len(above) < len(points)
+    assert abs(len(above) - len(expected)) <= 2  # float32 rounding at the two bounds
+    assert count == pytest.approx(np.count_nonzero(np.abs(heights) < 0.05), abs=2)
+    assert 50 <= len(floor) <= 200
+    floor_heights = floor.astype(np.float64) @ np.array(plane[:3]) + plane[3]
+    assert np.all(np.abs(floor_heights) < 0.05 + 1e-4)
 
 
 def test_selected_points_are_the_subsampled_valid_pixels_within_range(grabber):

@@ -89,7 +89,10 @@ def test_eval_takes_settings_from_a_config_file_and_the_command_line(
     recording, tmp_path, capsys
 ) -> None:
     config = tmp_path / "tracking.yaml"
-    config.write_text("tracking:\n  min_confidence_initialization: 100\n")
+    config.write_text(
+        "tracking:\n  min_confidence_initialization: 100\n"
+        "  min_confidence_weak_initialization: 100\n"
+    )
     code, result = _eval(capsys, str(recording), "--config", str(config), "--appearance", "on")
     assert code == 0
     assert result["appearance"] is True

@@ -4,6 +4,7 @@ clock runs 250 ms ahead."""
 from __future__ import annotations
 
 import logging
+import re
 import time
 
 import pytest
@@ -86,7 +87,9 @@ def test_offset_above_10ms_is_warned_once(hub, bus_params, caplog):
             sync.measure()
         warnings = [r.getMessage() for r in caplog.records]
         assert len(warnings) == 1
-        assert "50.0 ms behind the tracker's" in warnings[0]
+        said = re.search(r"([\d.]+) ms behind the tracker's", warnings[0])
+        assert said is not None, warnings[0]
+        assert float(said.group(1)) == pytest.approx(50.0, abs=2.0)  # a busy computer: +-2 ms
         assert "NTP" in warnings[0]
     finally:
         node.close()

@@ -64,10 +64,10 @@ def test_with_loop_the_replay_goes_on_and_time_keeps_increasing(venue):
     replay = LiveReplay(venue, "kinect2_1", loop=True, clock=clock, streams=("depth",))
     replay.open()
     count = len(replay.entries)
-    clock.t += replay.length + 0.5 * replay.period
+    clock.t += replay.length + replay.times[0] + 0.5 * replay.period
     frame = replay.read()
     assert frame.seq == count  # the first frame of the second loop
-    assert frame.timestamp == pytest.approx(1000.0 + replay.length)
+    assert frame.timestamp == pytest.approx(1000.0 + replay.length + replay.times[0])
 
 
 def test_only_the_streams_asked_for_are_decoded(venue):
@@ -81,3 +81,61 @@ def test_a_recording_with_several_sensors_needs_one_named(venue):
         LiveReplay(venue)
     with pytest.raises(SensorError, match="has no sensor 'cam9'"):
         LiveReplay(venue, "cam9")
+
+
+def test_a_bounce_loop_plays_backwards_without_a_jump(venue):
+    clock = FakeClock()
+    replay = LiveReplay(venue, "kinect2_0", loop="bounce", clock=clock, streams=("depth",))
+    replay.open()
+    n = len(replay.entries)
+    shown, stamps = [], []
+    for k in range(2 * n + 3):  # a whole cycle and a bit: forwards, backwards, forwards
+        clock.t = replay._due(k)
+        frame = replay.read()
+        shown.append(replay.cycle_index[frame.seq % len(replay.cycle_index)])
+        stamps.append(frame.timestamp)
+    assert shown[: n + 2] == [*range(n), n - 2, n - 3]
+    assert max(abs(a - b) for a, b in zip(shown, shown[1:], strict=False)) == 1  # no jump
+    assert all(b > a for a, b in zip(stamps, stamps[1:], strict=False))
+    assert replay.skipped == 0
+
+
+def test_locked_replays_of_one_recording_show_the_same_instant(venue):
+    """Detector nodes started at different moments (and one whose clock is off by 0.25 s)
+    replay their sensors at the same instant of the scene, in site time."""
+    clock_a, clock_b = FakeClock(5000.0), FakeClock(5000.0 + 0.25)  # b's clock runs ahead
+    a = LiveReplay(venue, "kinect2_0", loop="bounce", clock=clock_a, streams=("depth",))
+    b = LiveReplay(venue, "kinect2_2", loop="bounce", clock=clock_b, streams=("depth",))
+    a.lock_phase(0.0)
+    clock_a.t += 0.6
+    clock_b.t += 0.6
+    b.lock_phase(-0.25)  # started 0.6 s later; site time = its clock - 0.25 s
+    for _ in range(5):
+        clock_a.t += 0.4
+        clock_b.t += 0.4
+        fa, fb = a.read(), b.read()
+        scene_a = a.cycle_times[fa.seq % len(a.cycle_times)]
+        scene_b = b.cycle_times[fb.seq % len(b.cycle_times)]
+        # the same recording instant, to within a frame period (their frames interleave)
+        assert abs(scene_a - scene_b) <= 1.5 * a.period
+        assert fb.timestamp - 0.25 == pytest.approx(fa.timestamp, abs=1.5 * a.period)
+
+
+def test_an_unknown_loop_mode_is_refused(venue):
+    with pytest.raises(SensorError, match="loop must be one of"):
+        LiveReplay(venue, "kinect2_0", loop="sideways")
+
+
+def test_a_frame_already_too_old_is_skipped_for_the_next_one(venue):
+    clock = FakeClock()
+    replay = LiveReplay(venue, "kinect2_0", clock=clock, streams=("depth",))
+    replay.max_age_s = 0.01
+    replay.open()
+    assert replay.read().seq == 0
+    clock.t = replay._due(5) + 0.02  # the detector was busy: frame 5 became due 20 ms ago
+    frame = replay.read()
+    assert frame.seq == 6  # the next one, waited for (decoded meanwhile)
+    assert frame.timestamp == pytest.approx(replay._due(6))
+    assert replay.skipped == 5
+    clock.t = replay._due(9) + 0.005  # 5 ms old: fresh enough
+    assert replay.read().seq == 9

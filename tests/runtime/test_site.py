@@ -20,8 +20,9 @@ from websockets.sync.client import connect
 from optrack.net.bus import Bus
 from optrack.net.config import BUS_PARAMS
 from optrack.net.messages import DetectionsMessage, StatusMessage
+from optrack.recording import Recording
 
-from .conftest import Processes, free_port
+from .conftest import VENUE_SECONDS, Processes, free_port
 
 SENSORS = ("kinect2_0", "kinect2_1", "kinect2_2")
 
@@ -44,7 +45,7 @@ class Site:
         self.osc_server = ThreadingOSCUDPServer(("127.0.0.1", 0), dispatcher)
         self.port = free_port()
         self.websocket_port = free_port()
-        uris = ",".join(f"file://{venue}?loop=true#{s}" for s in SENSORS)
+        uris = ",".join(f"file://{venue}?loop=bounce#{s}" for s in SENSORS)
         config = tmp_path / "site.yaml"
         config.write_text(
             yaml.safe_dump(
@@ -185,6 +186,25 @@ def test_websocket_clients_receive_the_same_json(site):
         documents = [json.loads(client.recv(timeout=10)) for _ in range(10)]
     kinds = {d["header"]["frame_id"] for d in documents}
     assert kinds <= {"world", "heartbeat"} and "world" in kinds
+
+
+def test_the_site_shows_about_as_many_tracks_as_there_are_people(site, venue):
+    """Three sensors replayed as live cameras, each detector dropping frames it cannot keep
+    up with, looped through several turns: one track per person, not one per sensor or
+    per loop (at most one spare, for a person being handed over)."""
+    people = max(len(instant.people) for instant in Recording(venue).ground_truth())
+    site.wait(lambda: len(site.documents()) >= 5, 30, "no datagrams")
+    start = min(t for t, d in site.documents() if d.get("tracks")) + 2.0  # tracks confirmed
+    cycle = 2 * VENUE_SECONDS  # forwards and backwards
+    site.wait(lambda: site.documents()[-1][0] > start + 2 * cycle, 60, "too few loops")
+    counts = [
+        len(d["tracks"])
+        for t, d in site.documents(since=start)
+        if d["header"]["frame_id"] == "world"
+    ]
+    assert len(counts) > 20
+    print(f"{people} people; tracks per frame: max {max(counts)}, counts {sorted(set(counts))}")
+    assert max(counts) <= people + 1
 
 
 def test_a_killed_detector_restarts_within_5s_while_the_tracker_keeps_tracking(site):

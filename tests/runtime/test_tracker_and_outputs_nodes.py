@@ -180,3 +180,88 @@ def test_outputs_change_destination_while_running(site, make_client, receiver):
         assert [d.kind for d in statuses[-1].destinations] == ["udp"]
     finally:
         other.close()
+
+
+@pytest.fixture
+def direct(hub, tmp_path, receiver, request):
+    """The tracker node handing its frames straight to the outputs (as `optrack node track`
+    and `optrack run` do), with a quick fixed rate and drop delay."""
+    from optrack.tracking.params import SMOOTHING_PARAMS
+
+    mode = getattr(request, "param", "update")
+    address = f"127.0.0.1:{receiver.getsockname()[1]}"
+    node_params = NODE_PARAMS.create({"status_period_s": 0.2, "tracks_publish": mode})
+    outputs = OutputsNode(
+        hub, NODE_PARAMS.create(), OUTPUTS_PARAMS.create({"udp": address}), subscribe=False
+    )
+    tracker = TrackerNode(
+        hub,
+        node_params,
+        CalibrationStore(tmp_path / "tracker"),
+        live={"smoothing": SMOOTHING_PARAMS.create({"rate": 20.0, "drop_after": 0.3})},
+        sinks=[outputs.send],
+    )
+    thread = threading.Thread(target=tracker.run, daemon=True)
+    thread.start()
+    yield tracker
+    tracker.stop()
+    thread.join(5)
+    outputs.close()
+
+
+def stamp_of(document: dict) -> float:
+    return document["header"]["stamp"]["sec"] + document["header"]["stamp"]["nsec"] * 1e-9
+
+
+def test_every_batch_goes_out_at_once_stamped_with_its_capture_instant(
+    direct, make_client, receiver
+):
+    camera = make_client("cams")
+    time.sleep(0.2)
+    stamps = []
+    for k in range(12):
+        t = time.time()
+        sensor = f"cam{k % 2}"
+        camera.publish(camera.keys.detections(sensor), person(0.1 * k, 0.5, sensor, t))
+        stamps.append(t)
+        time.sleep(0.02)  # faster than the fixed rate: no repeat in between
+    frames = [d for d in documents(receiver, 0.2) if d["header"]["frame_id"] == "world"]
+    sent = [stamp_of(d) for d in frames]
+    for t in stamps:  # one datagram per batch, carrying that frame's capture instant
+        assert any(abs(s - t) < 1e-6 for s in sent), f"no datagram for the frame of {t}"
+    assert direct.batches == 12
+    assert direct.published >= 12
+    assert [d["tracks"] for d in frames if abs(stamp_of(d) - stamps[-1]) < 1e-6][0]
+
+
+def test_between_batches_tracks_repeat_at_the_fixed_rate_then_unseen_ones_drop(
+    direct, make_client, receiver
+):
+    camera = make_client("cams")
+    time.sleep(0.2)
+    walk(camera, ["cam0"], 0.5, rate=30.0)
+    last = time.time()
+    found = documents(receiver, 1.2)
+    frames = [d for d in found if d["header"]["frame_id"] == "world"]
+    after = [d for d in frames if stamp_of(d) >= last - 0.05]
+    repeats = [d for d in frames if abs(stamp_of(d) - stamp_of(after[0])) < 1e-6]
+    # 20 Hz for about 1.2 s after the last batch: the same stamp, sent again and again
+    assert len(repeats) >= 12, [stamp_of(d) for d in frames]
+    assert repeats[0]["tracks"], "the person is in the first repeats"
+    assert not repeats[-1]["tracks"], "a track unseen for drop_after is left out"
+    beats = [d for d in found if d["header"]["frame_id"] == "heartbeat"]
+    assert beats and beats[-1]["alive_IDs"] == [] and beats[-1]["max_ID"] >= 1
+    assert direct.repeats >= 12
+
+
+@pytest.mark.parametrize("direct", ["rate"], indirect=True)
+def test_at_a_fixed_rate_only_the_newest_state_goes_out(direct, make_client, receiver):
+    camera = make_client("cams")
+    time.sleep(0.2)
+    walk(camera, ["cam0", "cam1"], 1.0, rate=60.0)
+    frames = [d for d in documents(receiver, 0.1) if d["header"]["frame_id"] == "world"]
+    # about 20 frames for about 60 batches; each stamp the newest capture instant so far
+    assert direct.batches >= 30
+    assert 10 <= len(frames) <= 30, len(frames)
+    stamps = [stamp_of(d) for d in frames]
+    assert stamps == sorted(stamps)

@@ -84,7 +84,7 @@ def test_operator_shows_the_board_to_every_sensor_and_neighbouring_pair():
     pairs = set(neighbouring_pairs([_view(s) for s in sim.sensors]))
     assert pairs <= held
     floor = [s for s in views if s.kind == "floor"]
-    assert len(floor) == 3
+    assert len(floor) == sim.scenario.board.floor_placements
     assert sim.seconds > sum(1 for _ in views) * sim.board.params.hold_seconds
 
 
@@ -99,8 +99,69 @@ def test_a_neighbouring_pair_sees_the_same_board_at_once():
         sim.snapshot(t)
         assert t < sim.seconds
     t += 0.5
-    errors = [_detected_vs_true(sim, k, t, "infrared") for k in pair_step.sensors]
+    errors = [
+        _detected_vs_true(sim, k, t, _calibration_stream(sim.sensors[k])) for k in pair_step.sensors
+    ]
     assert all(e.max() < 0.5 for e in errors)
+
+
+def _calibration_stream(sensor) -> str:
+    return "infrared" if "infrared" in sensor.model.streams else "color"
+
+
+def test_calibration_scenario_mixes_four_models_and_the_sr4500_shares_views_and_floor():
+    sim = Simulation("calibration", seed=0)
+    models = [s.model.name for s in sim.sensors]
+    assert len(models) == 6 and set(models) == {"kinect2", "kinect1", "stereo", "sr4500"}
+    sr = models.index("sr4500")
+    held = [s.sensors for s in sim.operator.steps if s.kind == "hold"]
+    floor = [s.sensors for s in sim.operator.steps if s.kind == "floor"]
+    assert sum(1 for h in held if len(h) == 2 and sr in h) == 2  # both neighbours
+    assert sum(1 for f in floor if sr in f) >= 2  # the floor plane, not one board
+    assert all(any(k in f for f in floor) for k in range(6))
+
+
+def test_the_sr4500_finds_the_board_on_its_upsampled_infrared_image():
+    from optrack.calibration.board import Checkerboard as Board
+    from optrack.calibration.board import find_corners
+
+    sim = Simulation("calibration", seed=0)
+    sr = next(s.index for s in sim.sensors if s.model.name == "sr4500")
+    step = next(s for s in sim.operator.steps if s.sensors == (sr,))
+    index = sim.operator.steps.index(step)
+    t = 0.0
+    while not (sim.operator.index == index and sim.operator.phase == "hold"):
+        t += 0.25
+        sim.snapshot(t)
+        assert t < sim.seconds
+    state = sim.snapshot(t + 0.5)
+    frame = sim.frame(sr, 0, state)  # with the sensor's noise
+    truth = sim.truth(state).boards[0]
+    corners = find_corners(
+        frame.infrared, Board(truth.cols, truth.rows, truth.square), infrared=True
+    )
+    assert corners is not None
+    sensor = sim.sensors[sr]
+    camera_T_board = invert(sensor.world_T_camera) @ np.array(truth.world_T_board)
+    true_px, _ = project(
+        transform_points(camera_T_board, sim.board.corners), sensor.model.intrinsics
+    )
+    assert np.sqrt(np.mean(np.sum((corners - true_px) ** 2, axis=1))) < 0.3
+
+
+def test_the_operator_stands_still_while_holding_the_board_near_a_wall():
+    sim = Simulation("calibration", seed=0)
+    spots = []
+    for t in np.arange(0.0, 40.0, 0.1):
+        sim.snapshot(float(t))
+        if sim.operator.phase == "hold":
+            spots.append((sim.operator.index, sim.crowd.pos[sim.operator_index].copy()))
+    by_step: dict[int, list[np.ndarray]] = {}
+    for index, xy in spots:
+        by_step.setdefault(index, []).append(xy)
+    assert len(by_step) >= 3
+    for positions in by_step.values():
+        assert np.ptp(np.array(positions), axis=0).max() < 1e-9
 
 
 def _view(sensor):

@@ -34,6 +34,19 @@ def test_default_mixed_venue_has_three_sensors_four_to_six_people_and_furniture(
     assert counts <= {4, 5, 6} and len(counts) > 1
 
 
+def test_sensors_can_be_of_mixed_models_repeated_in_order_unless_one_is_forced(tmp_path):
+    path = tmp_path / "mixed_models.yaml"
+    path.write_text(
+        "sensors: {count: 5, models: [kinect2, sr4500]}\npeople: {count: 0}\n", encoding="utf-8"
+    )
+    sim = Simulation(str(path), seed=0)
+    assert [s.model.name for s in sim.sensors] == ["kinect2", "sr4500"] * 2 + ["kinect2"]
+    assert [s.id for s in sim.sensors][:2] == ["kinect2_0", "sr4500_1"]
+    assert {s.model.name for s in Simulation(str(path), sensor_model="kinect1").sensors} == {
+        "kinect1"
+    }
+
+
 def test_crowd_scenario_has_seven_people_one_to_nine_metres_from_the_sensor():
     sim = Simulation("crowd", seed=0)
     assert len(sim.crowd.people) == 7

@@ -35,7 +35,12 @@ def test_schema_holds_openptracks_multi_camera_defaults() -> None:
 
 
 def test_an_unvalidated_track_dies_after_sec_before_fake() -> None:
-    tracker = Tracker(TRACKING_PARAMS.create({"min_confidence_initialization": 0.5}))
+    # detections at 0.0 count for neither validation (confident or weak)
+    tracker = Tracker(
+        TRACKING_PARAMS.create(
+            {"min_confidence_initialization": 0.5, "min_confidence_weak_initialization": 0.5}
+        )
+    )
     tracker.update(_batch(0.0, 1.0))  # born (confident) ...
     tracker.update(_batch(1 / RATE, 1.0, confidence=0.0))  # ... then only weak detections
     _run(tracker, 2 / RATE, 2.35, 1.0, confidence=0.0)
@@ -106,10 +111,45 @@ def test_a_missing_track_becomes_normal_again_when_detected() -> None:
     assert tracker.tracks[0].id == 1
 
 
-def test_a_weak_detection_starts_no_track() -> None:
-    tracker = Tracker(TRACKING_PARAMS.create({"min_confidence_initialization": 0.5}))
-    _run(tracker, 0.0, 1.0, 1.0, confidence=0.2)
+WEAK = {"min_confidence_initialization": 0.5, "min_confidence_weak_initialization": 0.0}
+
+
+def test_a_detection_below_the_weak_threshold_starts_no_track() -> None:
+    tracker = Tracker(TRACKING_PARAMS.create(WEAK))
+    _run(tracker, 0.0, 1.0, 1.0, confidence=-0.2)
     assert tracker.tracks == []
+
+
+def test_a_weak_but_steady_detection_is_published_after_weak_detections_to_validate_in_a_row() -> (
+    None
+):
+    """A person half hidden behind furniture: weak detections, but in every frame."""
+    tracker = Tracker(TRACKING_PARAMS.create(WEAK))
+    needed = tracker.params.weak_detections_to_validate
+    _run(tracker, 0.0, (needed - 1) / RATE, 1.0, confidence=0.2)
+    assert len(tracker.tracks) == 1
+    assert tracker.output().tracks == []
+    tracker.update(_batch((needed - 1) / RATE, 1.0, confidence=0.2))
+    assert [t.id for t in tracker.output().tracks] == [1]
+
+
+def test_a_flickering_weak_detection_is_never_published() -> None:
+    """A false alarm seen in every other frame of its sensor never makes a run long enough."""
+    tracker = Tracker(TRACKING_PARAMS.create(WEAK))
+    for k in range(60):
+        tracker.update(_batch(k / RATE, *([1.0] if k % 2 == 0 else []), confidence=0.2))
+        assert tracker.output().tracks == []
+    assert len(tracker.tracks) == 1  # alive (never unseen for sec_before_missing), unpublished
+
+
+def test_frames_of_another_sensor_do_not_break_a_sensors_run() -> None:
+    """Only a frame of a sensor that saw the track and missed it starts its run over."""
+    tracker = Tracker(TRACKING_PARAMS.create(WEAK))
+    needed = tracker.params.weak_detections_to_validate
+    for k in range(needed):
+        tracker.update(_batch(k / RATE, 1.0, confidence=0.2, sensor="a"))
+        tracker.update(_batch(k / RATE + 0.001, sensor="b"))  # b does not see there
+    assert [t.id for t in tracker.output().tracks] == [1]
 
 
 def test_detections_below_min_confidence_detections_are_ignored() -> None:
@@ -117,3 +157,17 @@ def test_detections_below_min_confidence_detections_are_ignored() -> None:
     _run(tracker, 0.0, 1.0, 1.0)
     _run(tracker, 1.0, 1.5, 1.0, confidence=-1.5)
     assert tracker.tracks[0].last_detection == pytest.approx(1.0 - 1 / RATE)
+
+
+def test_a_weak_second_detection_beside_a_tracked_person_starts_no_track() -> None:
+    """A split silhouette or a second sensor's weak view of someone tracked is no new person."""
+    tracker = Tracker(TRACKING_PARAMS.create(WEAK))
+    _run(tracker, 0.0, 0.2, 1.0)  # tracked first
+    for k in range(6, 45):
+        people = [
+            Detection(x=1.0, y=0.0, z=0.9, height=1.7, confidence=1.0),
+            Detection(x=1.15, y=0.0, z=0.9, height=1.7, confidence=0.2),
+        ]
+        tracker.update(DetectionBatch(sensor_id="a", stamp=k / RATE, detections=people))
+    assert [t.id for t in tracker.output().tracks] == [1]
+    assert len(tracker.tracks) == 1

@@ -1,0 +1,1 @@
+"""The calibration wizard (QWizard) and its live views; see :mod:`app.wizard.wizard`."""

@@ -1,0 +1,49 @@
+"""File → Open recording… plays a recording through the embedded site (a real
+`optrack run --headless --recording PATH --loop`), and the window shows it as live
+(OpenGL: run under Xvfb)."""
+
+from __future__ import annotations
+
+import pytest
+
+from app.main_window import MainWindow
+from optrack.recording import Recording
+from optrack.runtime.site import venue_recording
+
+from .conftest import VENUE
+
+pytestmark = pytest.mark.opengl
+
+
+@pytest.fixture
+def window(qtbot, site_config):
+    window = MainWindow()
+    window.recording_opener.config = str(site_config)
+    window.show()
+    yield window
+    window.close()
+    if window.embedded_site is not None:
+        assert not window.embedded_site.running  # closing the window stopped the site
+
+
+def test_a_recording_played_through_the_site_shows_tracks_and_its_playhead(qtbot, window):
+    path = venue_recording(VENUE["scenario"], VENUE["seed"], VENUE["venue_seconds"])
+    sensors = Recording(path).sensor_ids
+    assert window.open_recording(str(path))
+    assert window.recording.source_label.text() == f"Playing {path}"
+    qtbot.waitUntil(
+        lambda: (
+            window.tracks_table.model.rowCount() > 0 and bool(window.top_view.track_positions())
+        ),
+        timeout=60000,
+    )
+    assert window.site_label.text().startswith(f"Recording {path.name} on the embedded site")
+    qtbot.waitUntil(lambda: sorted(window.recording.players) == sorted(sensors), timeout=10000)
+    qtbot.waitUntil(lambda: "/ 4.0 s" in window.recording.position_label.text(), timeout=10000)
+    assert all(f"{s} " in window.recording.rates.text() for s in sensors)
+
+
+def test_opening_a_folder_that_is_not_a_recording_says_so(qtbot, window, tmp_path):
+    assert not window.open_recording(str(tmp_path))
+    assert "is not an optrack recording" in window.recording.message.text()
+    assert window.embedded_site is None  # nothing was started

@@ -1,0 +1,236 @@
+"""The wizard's pages show what the live calibration's state says (offscreen Qt, no site:
+the states are built here, as LiveCalibration.state() returns them)."""
+
+import numpy as np
+import pytest
+
+from app.wizard.widgets import COUNT_COLORS
+from app.wizard.wizard import WIZARD_PARAMS, CalibrationWizard
+from optrack.calibration.live import LiveState, SensorLive
+from optrack.calibration.printable import board_label
+from optrack.geometry import make_pose
+from optrack.types import Intrinsics
+
+KINECT = Intrinsics(365.0, 365.0, 256.0, 212.0, width=512, height=424)
+SENSORS = ["cam0", "cam1", "cam2"]
+
+
+def matrix(pose):
+    return tuple(tuple(float(v) for v in row) for row in pose)
+
+
+def sensor(name, views, calibrated, rms=None, **extra):
+    pose = make_pose(np.diag([1.0, -1.0, -1.0]), [float(SENSORS.index(name)), 0.0, 2.5])
+    return SensorLive(
+        sensor=name,
+        views=views,
+        rms_px=rms,
+        calibrated=calibrated,
+        image=np.full((106, 128, 3), 90, dtype=np.uint8),
+        board_seen=views > 0,
+        coverage=None,
+        world_T_camera=pose if calibrated else None,
+        intrinsics=KINECT,
+        **extra,
+    )
+
+
+def state(phase, sensors, covisibility=(), floor_views=0, message="", **extra):
+    return LiveState(
+        phase=phase,
+        sensors={s.sensor: s for s in sensors},
+        covisibility=list(covisibility),
+        floor_views=floor_views,
+        refinement_samples={},
+        message=message,
+        **extra,
+    )
+
+
+@pytest.fixture
+def wizard(qtbot):
+    wizard = CalibrationWizard(None, world_view=False)
+    qtbot.addWidget(wizard)
+    wizard.sensors = list(SENSORS)
+    return wizard
+
+
+def test_without_a_site_page_one_says_so_and_next_stays_off(wizard):
+    page = wizard.network_page
+    assert page.error.text().startswith("No site connected")
+    assert not page.isComplete()
+    params = WIZARD_PARAMS.create()
+    assert (page.cols.value(), page.rows.value()) == (params.board_cols, params.board_rows)
+    assert page.square.value() == pytest.approx(params.board_square * 1000)
+
+
+def test_print_a_board_writes_the_pdf_and_a_symmetric_board_is_refused(wizard, tmp_path):
+    page = wizard.network_page
+    assert page.print_board(str(tmp_path / "board.pdf"))
+    pdf = (tmp_path / "board.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF") and board_label(page.board()).encode()[:40] in pdf
+    assert "Wrote" in page.printed.text()
+    page.cols.setValue(8)
+    page.rows.setValue(6)
+    assert not page.print_board(str(tmp_path / "symmetric.pdf"))
+    assert "looks the same after a half turn" in page.error.text()
+    assert not (tmp_path / "symmetric.pdf").exists()
+    assert not page.validatePage()  # and the wizard does not go on with it
+
+
+def test_extrinsics_page_colours_counts_draws_covisibility_and_enables_next(wizard):
+    page = wizard.extrinsics_page
+    page.images.set_sensors(SENSORS)
+    fair, good = wizard.view_thresholds("extrinsics")
+    early = state(
+        "extrinsics",
+        [
+            sensor("cam0", good + 3, True, 0.21),
+            sensor("cam1", fair, True, 0.34, parent="cam0"),
+            sensor("cam2", fair - 1, False),
+        ],
+        covisibility=[("cam0", "cam1", fair), ("cam1", "cam2", 0)],
+        message="Move the board where cam2 and a calibrated sensor both see it.",
+    )
+    page.show_state(early)
+    views = page.table.keys.index("views")
+    colours = [page.table.item(page.table.rows[s], views).background().color() for s in SENSORS]
+    assert colours == [COUNT_COLORS["green"], COUNT_COLORS["yellow"], COUNT_COLORS["red"]]
+    assert page.table.text("cam1", "status") == "calibrated (via cam0)"
+    assert page.table.text("cam2", "rms") == ""
+    assert page.graph.edges == {("cam0", "cam1"): fair}
+    assert page.graph.calibrated == {"cam0", "cam1"}
+    assert page.message.text() == early.message
+    assert "0.34 px at worst" in page.rms.text() and "2 of 3 sensors" in page.rms.text()
+    assert page.images.tiles["cam2"].caption == f"cam2: {fair - 1} views"
+    assert not page.isComplete()
+    done = state(
+        "extrinsics",
+        [sensor(s, good, True, 0.3) for s in SENSORS],
+        covisibility=[("cam0", "cam1", good), ("cam1", "cam2", good)],
+    )
+    page.show_state(done)
+    assert page.isComplete()
+    assert page.graph.edges == {("cam0", "cam1"): good, ("cam1", "cam2"): good}
+
+
+def test_intrinsics_page_shows_the_coverage_of_the_sensor_it_captures(wizard):
+    page = wizard.intrinsics_page
+    page.sensor.addItems(SENSORS)
+    page.sensor.setCurrentText("cam1")
+    coverage = np.zeros((6, 8))
+    coverage[2:4, 3:5] = 0.7
+    cam1 = sensor("cam1", 9, False)
+    cam1.coverage = coverage
+    page.show_state(state("intrinsics", [cam1]))
+    assert page.tile.coverage is not None and page.tile.coverage.max() == pytest.approx(0.7)
+    assert page.tile.caption == "cam1: 9 views"
+    assert page.table.text("cam1", "views") == "9"
+    assert page.table.text("cam0", "intrinsics") == "the sensor's own"
+    assert page.isComplete()  # optional: Next keeps the sensors' own intrinsics
+
+
+def test_floor_page_counts_floor_views_and_needs_a_solve(wizard):
+    page = wizard.floor_page
+    page.images.set_sensors(SENSORS)
+    page.show_state(
+        state(
+            "floor",
+            [sensor("cam0", 2, True, on_floor=True), sensor("cam1", 0, True)],
+            floor_views=4,
+            operator="laying the board at place 2 of 3",
+        )
+    )
+    assert page.floor_views.text() == "Floor views: 4 (laying the board at place 2 of 3)"
+    assert page.images.tiles["cam0"].caption == "cam0, on the floor"
+    assert not page.isComplete()  # nothing solved yet
+
+
+def test_a_site_without_sensors_is_said_in_a_sentence_on_page_one(qtbot):
+    """The backend's refusal (no detector node answers on this bus) reaches the page."""
+    from optrack.net.bus import Bus
+    from optrack.net.config import BUS_PARAMS
+
+    from .conftest import free_port
+
+    hub = Bus("empty", "hub", BUS_PARAMS.create({"local_port": free_port()}), host=True)
+    wizard = CalibrationWizard(hub, world_view=False)
+    qtbot.addWidget(wizard)
+    try:
+        page = wizard.network_page
+        assert page.sensors_note.text() == "Looking for the site's sensors…"
+        qtbot.waitUntil(lambda: bool(page.error.text()), timeout=30000)
+        sentence = page.error.text()
+        assert sentence.endswith(".")
+        assert "sensor" in sentence.lower() or "node" in sentence.lower()
+        assert page.sensors_note.text() == "No sensors."
+        assert not page.isComplete() and page.retry.isEnabled()
+    finally:
+        wizard.shut_down()
+        hub.close()
+
+
+def test_refinement_page_plots_trajectories_before_and_after_and_the_error_figure(wizard):
+    from optrack.calibration.live import RefinementReport
+    from optrack.types import NetworkCalibration, SensorCalibration
+
+    page = wizard.refinement_page
+    t = np.linspace(0.0, 2 * np.pi, 40)
+    walk = np.column_stack([np.cos(t), np.sin(t), np.full_like(t, 1.1)])
+    report = RefinementReport(
+        calibration=NetworkCalibration(
+            sensors={"cam0": SensorCalibration(world_T_camera=matrix(np.eye(4)))}
+        ),
+        error_before_m=0.112,
+        error_after_m=0.0198,
+        trajectories_before={"cam0": walk, "cam1": walk + 0.1},
+        trajectories_after={"cam0": walk, "cam1": walk + 0.01},
+        skipped=["cam2"],
+    )
+    page.report = report
+    page._refined(report)
+    assert set(page.before.curves) == set(page.after.curves) == {"cam0", "cam1"}
+    assert "11.2 cm on average before refinement and 2.0 cm after" in page.figure.text()
+    assert "cam2" in page.figure.text()
+    assert wizard.refined and wizard.calibration is report.calibration
+
+
+def test_review_page_shows_each_sensors_quality_from_the_calibration_file(wizard):
+    from optrack.calibration.files import CalibrationFile, SensorEntry
+
+    pose = make_pose(np.diag([1.0, -1.0, -1.0]), [1.0, 0.0, 2.5])
+    moved = make_pose(translation=[0.03, 0.04, 0.0])
+    calibration = CalibrationFile(
+        sensors={
+            "cam0": SensorEntry(world_T_camera=matrix(pose), views=40, reprojection_rms_px=0.08),
+            "cam1": SensorEntry(
+                world_T_camera=matrix(pose),
+                views=3,
+                reprojection_rms_px=0.31,
+                refinement=matrix(moved),
+            ),
+        },
+        world="floor",
+        quality={
+            "reprojection_rms_px": 0.2,
+            "floor_views": 6,
+            "refinement_error_before_m": 0.05,
+            "refinement_error_after_m": 0.02,
+        },
+    )
+    page = wizard.review_page
+    page.show_file(calibration)
+    assert page.table.text("cam0", "views") == "40"
+    assert page.table.text("cam1", "rms") == "0.31"
+    assert page.table.text("cam1", "refinement") == "5.0 cm, 0.00°"
+    assert page.table.text("cam0", "refinement") == "not refined"
+    assert page.table.text("cam0", "height") == "2.50"
+    views = page.table.keys.index("views")
+    assert (
+        page.table.item(page.table.rows["cam1"], views).background().color()
+        == (COUNT_COLORS["red"])
+    )
+    assert page.summary.text() == (
+        "2 sensors calibrated; reprojection RMS 0.20 px; 6 floor views: the world's origin is "
+        "on the floor; refined from a walk: the sensors agree within 2.0 cm (5.0 cm before)."
+    )
