@@ -177,6 +177,13 @@ class LiveCalibrationError(UserError):
     """A live calibration step that cannot be done now."""
 
 
+# A camera's optical frame (x right, y down, z ahead) seen as a level frame (x right,
+# y ahead, z up): the display frame of the live poses until the floor is known.
+LEVEL_T_OPTICAL = np.array(
+    [[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+)
+
+
 @dataclasses.dataclass
 class SensorLive:
     """One sensor as the wizard shows it."""
@@ -513,12 +520,15 @@ class LiveCalibration:
 
     def _current_poses(self) -> dict[str, np.ndarray]:
         """world_T_camera of every calibrated sensor now: the live iSAM2 estimate (in the
-        floor frame once a floor board is in it), else the tree's chain of PnP poses."""
+        floor frame once a floor board is in it), else the tree's chain of PnP poses.
+        Until a floor board is seen the frame is the first camera's, turned level
+        (:data:`LEVEL_T_OPTICAL`: x right, y ahead, z up) so that a 3D view over a floor grid
+        shows the cameras upright rather than lying on their backs."""
         c = self.calibrator
         if c is None or c.tree.root is None:
             return {}
         estimate = c.estimate
-        world_T_network = np.eye(4)
+        world_T_network = LEVEL_T_OPTICAL
         if estimate is not None and estimate.exists(FLOOR_KEY):
             world_T_network = estimate.atPose3(FLOOR_KEY).matrix()
         poses = {}

@@ -39,35 +39,6 @@ def test_a_node_250ms_ahead_is_synchronised_and_its_detections_keep_time_order(
     tracker = processes.start(
         ["optrack.cli", "node", "track", "--site", "skew", "--config", plain], "tracker"
     )
-    uri = f"file://{venue}?loop=true#"
-    processes.start(
-        [
-            "optrack.cli",
-            "node",
-            "detect",
-            "--sensor",
-            uri + "kinect2_0",
-            "--site",
-            "skew",
-            "--config",
-            plain,
-        ],
-        "plain",
-    )
-    processes.start(
-        [
-            "optrack.cli",
-            "node",
-            "detect",
-            "--sensor",
-            uri + "kinect2_1",
-            "--site",
-            "skew",
-            "--config",
-            skewed,
-        ],
-        "skewed",
-    )
     observer = Bus(
         "skew", "observer", BUS_PARAMS.create({"local_port": port, "connect_timeout_s": 60.0})
     )
@@ -86,6 +57,40 @@ def test_a_node_250ms_ahead_is_synchronised_and_its_detections_keep_time_order(
     try:
         observer.subscribe(observer.keys.detections(), DetectionsMessage, on_detections)
         observer.subscribe(observer.keys.status(), StatusMessage, on_status)
+        # The nodes measure their clock offset against the tracker as they start: start
+        # them once it answers (a node started before it stamps in its own time until then).
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and "tracker" not in statuses:
+            time.sleep(0.1)
+        uri = f"file://{venue}?loop=true#"
+        processes.start(
+            [
+                "optrack.cli",
+                "node",
+                "detect",
+                "--sensor",
+                uri + "kinect2_0",
+                "--site",
+                "skew",
+                "--config",
+                plain,
+            ],
+            "plain",
+        )
+        processes.start(
+            [
+                "optrack.cli",
+                "node",
+                "detect",
+                "--sensor",
+                uri + "kinect2_1",
+                "--site",
+                "skew",
+                "--config",
+                skewed,
+            ],
+            "skewed",
+        )
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline:
             with lock:

@@ -4,6 +4,7 @@ the cache reused; the sensors play it back and forth."""
 from __future__ import annotations
 
 import threading
+import time
 
 from optrack.net.bus import Bus
 from optrack.net.config import BUS_PARAMS
@@ -37,7 +38,13 @@ def test_the_first_run_shows_the_venue_rendering_on_stderr_and_in_the_site_statu
     try:
         observer.subscribe(observer.keys.status("site"), StatusMessage, on_status)
         uris = site.sensor_uris()
-        site.publish_status()
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:  # the bus delivers asynchronously
+            site.publish_status()
+            time.sleep(0.2)
+            with lock:
+                if seen and seen[-1].state != "rendering":
+                    break
         observer.close()
     finally:
         site.stop()
