@@ -124,6 +124,24 @@ class WizardPage(QWizardPage):
         self.error.setText(sentence)
         self.error.setVisible(bool(sentence))
 
+    capturing: Any = False
+
+    def start_phase(self, phase: str, title: str) -> None:
+        """Ask the site to capture for ``phase`` (on the worker); ``capturing`` says so."""
+        live = self.calibration_wizard.live
+        self.capturing = True
+        self.run(
+            title,
+            lambda progress: live.start(phase),
+            failed=lambda _: setattr(self, "capturing", False),
+        )
+
+    def stop_capture(self) -> None:
+        if self.capturing:
+            live = self.calibration_wizard.live
+            self.capturing = False
+            self.run("Stopping the capture", lambda progress: live.stop())
+
     def run(
         self,
         title: str,
@@ -529,21 +547,9 @@ class ExtrinsicsPage(WizardPage):
         self.start_capture()
 
     def start_capture(self) -> None:
-        live = self.calibration_wizard.live
-        self.capturing = True
         self.all_calibrated = False
         self.completeChanged.emit()
-        self.run(
-            "Starting the board capture",
-            lambda progress: live.start("extrinsics"),
-            failed=lambda _: setattr(self, "capturing", False),
-        )
-
-    def stop_capture(self) -> None:
-        if self.capturing:
-            live = self.calibration_wizard.live
-            self.capturing = False
-            self.run("Stopping the capture", lambda progress: live.stop())
+        self.start_phase("extrinsics", "Starting the board capture")
 
     def cleanupPage(self) -> None:  # noqa: N802 - Qt
         self.stop_capture()
@@ -676,19 +682,7 @@ class FloorPage(WizardPage):
         self.stop_capture()
 
     def capture_place(self) -> None:
-        live = self.calibration_wizard.live
-        self.capturing = True
-        self.run(
-            "Starting the floor capture",
-            lambda progress: live.start("floor"),
-            failed=lambda _: setattr(self, "capturing", False),
-        )
-
-    def stop_capture(self) -> None:
-        if self.capturing:
-            live = self.calibration_wizard.live
-            self.capturing = False
-            self.run("Stopping the capture", lambda progress: live.stop())
+        self.start_phase("floor", "Starting the floor capture")
 
     def solve(self) -> None:
         live = self.calibration_wizard.live

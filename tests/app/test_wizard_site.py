@@ -146,7 +146,8 @@ def test_wizard_calibrates_the_simulated_site_within_3_cm_and_half_a_degree(
     assert "the world's origin is on the floor" in floor.solved.text()
     wizard.next()
 
-    # 5. Refinement, optional: skipped here (tests/app/test_wizard_site.py runs it below).
+    # 5. Refinement, optional: skipped here (live walks on a loaded 2-core machine are
+    # stamped too late to refine reliably; see docs/gui.md).
     assert wizard.currentPage() is wizard.refinement_page
     wizard.next()
 
