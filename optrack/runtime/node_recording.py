@@ -241,13 +241,10 @@ class NodeRecorder:
     def _write_loop(
         self, writer: RecordingWriter, frames: queue.Queue[tuple[RGBDFrame, float] | None]
     ) -> None:
-        failed = False
         while True:
             item = frames.get()
             if item is None:
                 break
-            if failed:
-                continue
             frame, stamp = item
             if self._last_t is not None:
                 stamp = max(stamp, self._last_t)  # a clock-offset update must not go back
@@ -255,22 +252,21 @@ class NodeRecorder:
             try:
                 writer.write(copy)
             except OSError as error:
-                failed = True
                 self._failed(_os_sentence(error, writer.path, self.info.id, self.frames))
-                continue
+                break
             except UserError as error:
-                failed = True
                 self._failed(f"recording of sensor '{self.info.id}' stopped: {error}")
-                continue
+                break
             self.frames = writer.frame_counts[self.info.id]
             self.bytes = writer.byte_counts[self.info.id]
             if self._first_t is None:
                 self._first_t = stamp
             self._last_t = stamp
         try:
-            writer.close()
+            writer.close()  # after a failure too: what was written stays readable
         except OSError as error:
-            self._failed(_os_sentence(error, writer.path, self.info.id, self.frames))
+            if not self.error:
+                self._failed(_os_sentence(error, writer.path, self.info.id, self.frames))
         self.node.log.info(
             "recording of sensor '%s' closed: %d frames in %s",
             self.info.id,
@@ -279,10 +275,10 @@ class NodeRecorder:
         )
 
     def _failed(self, sentence: str) -> None:
+        with self._lock:
+            self._writer = None  # no further frames are queued; status says "not recording"
         self.error = sentence
         self.node.report_error(sentence)
-        with self._lock:
-            self._writer = None  # no further frames are queued
 
     @property
     def seconds(self) -> float:

@@ -212,7 +212,7 @@ def test_a_full_disk_stops_the_recording_with_a_sentence_and_keeps_what_was_writ
     node = nodes["kinect2_0"]
     take = small_disk / "take"
     control.start_recording(nodes, str(take))
-    wait_until(lambda: node.recorder.error != "")
+    wait_until(lambda: node.recorder.result()["closed"] and node.recorder.error != "")
     assert "is full" in node.recorder.error and "Free space" in node.recorder.error
     assert node.status().values["recording"] is False
     assert node.last_error == node.recorder.error
