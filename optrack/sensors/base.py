@@ -11,8 +11,42 @@ import abc
 from collections.abc import Iterator
 
 from optrack.errors import UserError
+from optrack.params import Param
 from optrack.recording.format import SensorInfo
 from optrack.types import RGBDFrame
+
+
+def stream_mode_params(max_fps: int) -> list[Param]:
+    """The mode a camera driver asks its device for (the nearest one it has is used)."""
+    return [
+        Param(
+            "width",
+            640,
+            min=1,
+            max=4096,
+            step=1,
+            unit="px",
+            help="Depth image width wanted; the device's nearest mode is used.",
+        ),
+        Param(
+            "height",
+            480,
+            min=1,
+            max=4096,
+            step=1,
+            unit="px",
+            help="Depth image height wanted; the device's nearest mode is used.",
+        ),
+        Param(
+            "fps",
+            30,
+            min=1,
+            max=max_fps,
+            step=1,
+            unit="Hz",
+            help="Frame rate wanted; the device's nearest mode is used.",
+        ),
+    ]
 
 
 class SensorError(UserError):

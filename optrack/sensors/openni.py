@@ -44,7 +44,7 @@ import numpy as np
 
 from optrack.params import Param, Params, Schema, register
 from optrack.recording.format import SensorInfo
-from optrack.sensors.base import SensorError
+from optrack.sensors.base import SensorError, stream_mode_params
 from optrack.sensors.live import DeviceLost, LiveSensor, Mode, live_params, nearest_mode
 from optrack.types import Intrinsics, RGBDFrame
 
@@ -62,33 +62,7 @@ OPENNI_PARAMS = register(
     Schema(
         "openni",
         [
-            Param(
-                "width",
-                640,
-                min=1,
-                max=4096,
-                step=1,
-                unit="px",
-                help="Depth image width wanted; the device's nearest mode is used.",
-            ),
-            Param(
-                "height",
-                480,
-                min=1,
-                max=4096,
-                step=1,
-                unit="px",
-                help="Depth image height wanted; the device's nearest mode is used.",
-            ),
-            Param(
-                "fps",
-                30,
-                min=1,
-                max=120,
-                step=1,
-                unit="Hz",
-                help="Frame rate wanted; the device's nearest mode is used.",
-            ),
+            *stream_mode_params(max_fps=120),
             Param("color", True, help="Capture colour when the device has a colour camera."),
             Param(
                 "infrared",

@@ -22,7 +22,7 @@ import numpy as np
 
 from optrack.params import Param, Params, Schema, register
 from optrack.recording.format import SensorInfo
-from optrack.sensors.base import SensorError
+from optrack.sensors.base import SensorError, stream_mode_params
 from optrack.sensors.live import DeviceLost, LiveSensor, Mode, live_params, nearest_mode
 from optrack.types import Intrinsics, RGBDFrame
 
@@ -34,33 +34,7 @@ REALSENSE_PARAMS = register(
     Schema(
         "realsense",
         [
-            Param(
-                "width",
-                640,
-                min=1,
-                max=4096,
-                step=1,
-                unit="px",
-                help="Depth image width wanted; the device's nearest mode is used.",
-            ),
-            Param(
-                "height",
-                480,
-                min=1,
-                max=4096,
-                step=1,
-                unit="px",
-                help="Depth image height wanted; the device's nearest mode is used.",
-            ),
-            Param(
-                "fps",
-                30,
-                min=1,
-                max=300,
-                step=1,
-                unit="Hz",
-                help="Frame rate wanted; the device's nearest mode is used.",
-            ),
+            *stream_mode_params(max_fps=300),
             Param("color", True, help="Capture colour when the device has a colour camera."),
             Param("infrared", False, help="Capture the left infrared image."),
             Param(

@@ -367,6 +367,48 @@ class Kinect1(SensorModel):
         return Measurement(to_millimetres(z, valid), color=self._color(render, rng, noise))
 
 
+def _time_of_flight_edges(flying_probability: float) -> list[Param]:
+    """The grazing-angle and mixed-pixel parameters of the time-of-flight models."""
+    return [
+        Param(
+            "max_incidence_deg",
+            80.0,
+            30,
+            89,
+            1,
+            "deg",
+            "Grazing surfaces beyond this give no depth.",
+        ),
+        Param(
+            "flying_threshold",
+            0.1,
+            0.01,
+            2.0,
+            0.01,
+            "m",
+            "Depth jump that makes an edge for mixed pixels.",
+        ),
+        Param(
+            "flying_relative",
+            0.05,
+            0.0,
+            1.0,
+            0.01,
+            "",
+            "The jump must also exceed this fraction of the nearer depth.",
+        ),
+        Param(
+            "flying_probability",
+            flying_probability,
+            0.0,
+            1.0,
+            0.05,
+            "",
+            "Chance an edge pixel is a mixed (flying) pixel.",
+        ),
+    ]
+
+
 # ----------------------------------------------------------------- Kinect v2
 
 KINECT2_PARAMS = register(
@@ -386,42 +428,7 @@ KINECT2_PARAMS = register(
             Param(
                 "noise_angle", 0.0001, 0.0, 0.05, 0.0001, "m", "Axial noise: incidence-angle term."
             ),
-            Param(
-                "max_incidence_deg",
-                80.0,
-                30,
-                89,
-                1,
-                "deg",
-                "Grazing surfaces beyond this give no depth.",
-            ),
-            Param(
-                "flying_threshold",
-                0.1,
-                0.01,
-                2.0,
-                0.01,
-                "m",
-                "Depth jump that makes an edge for mixed pixels.",
-            ),
-            Param(
-                "flying_relative",
-                0.05,
-                0.0,
-                1.0,
-                0.01,
-                "",
-                "The jump must also exceed this fraction of the nearer depth.",
-            ),
-            Param(
-                "flying_probability",
-                0.5,
-                0.0,
-                1.0,
-                0.05,
-                "",
-                "Chance an edge pixel is a mixed (flying) pixel.",
-            ),
+            *_time_of_flight_edges(0.5),
             Param(
                 "ir_gain",
                 20000.0,
@@ -583,42 +590,7 @@ SR4500_PARAMS = register(
                 "",
                 "Reference (white target) infrared albedo.",
             ),
-            Param(
-                "max_incidence_deg",
-                80.0,
-                30,
-                89,
-                1,
-                "deg",
-                "Grazing surfaces beyond this give no depth.",
-            ),
-            Param(
-                "flying_threshold",
-                0.1,
-                0.01,
-                2.0,
-                0.01,
-                "m",
-                "Depth jump that makes an edge for mixed pixels.",
-            ),
-            Param(
-                "flying_relative",
-                0.05,
-                0.0,
-                1.0,
-                0.01,
-                "",
-                "The jump must also exceed this fraction of the nearer depth.",
-            ),
-            Param(
-                "flying_probability",
-                0.6,
-                0.0,
-                1.0,
-                0.05,
-                "",
-                "Chance an edge pixel is a mixed pixel.",
-            ),
+            *_time_of_flight_edges(0.6),
             Param("ir_gain", 30000.0, 100, 65535, 100, "DN", "Amplitude of a white target at 1 m."),
             Param(
                 "ir_noise",

@@ -1,23 +1,16 @@
 """Qt is configured as the application configures it, before pytest-qt makes its QApplication;
 and an embedded site of its own for the tests that start one."""
 
-import socket
-
 import pytest
 import yaml
 
 from app.main import configure_qt
+from tests.conftest import free_port
 
 configure_qt()
 
 # A short venue: rendered once per computer (cached by optrack.runtime.site), then looped.
 VENUE = {"scenario": "mixed", "seed": 0, "venue_seconds": 4.0}
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 @pytest.fixture(scope="session")

@@ -131,7 +131,7 @@ def test_query_gets_the_queryables_reply(hub, make_client):
     node = make_client("cam0")
     time.sleep(0.2)
     replies = node.query(node.keys.clock, ClockRequest(t0=5.0), ClockReply, timeout=2.0)
-    assert [(r.t0, r.t1, r.t2, r.sender) for r in replies] == [(5.0, 6.0, 7.0, "tracker")]
+    assert [(r.t0, r.t1, r.t2, r.sender) for r in replies] == [(5.0, 6.0, 7.0, "hub")]
 
 
 def test_node_without_a_hub_gives_up_with_one_sentence():

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -13,16 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from optrack.net.bus import Bus
-from optrack.net.config import BUS_PARAMS
+from tests.conftest import free_port  # noqa: F401 - the runtime tests import it from here
 
 VENUE_SECONDS = 1.5
-
-
-def free_port(kind: int = socket.SOCK_STREAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture(scope="session")
@@ -34,32 +26,6 @@ def venue(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("venue") / "mixed"
     write_recording(Simulation("mixed", seed=0, seconds=VENUE_SECONDS), path)
     return path
-
-
-@pytest.fixture
-def bus_params():
-    return BUS_PARAMS.create({"local_port": free_port(), "connect_timeout_s": 10.0})
-
-
-@pytest.fixture
-def hub(bus_params) -> Iterator[Bus]:
-    bus = Bus("test", "hub", bus_params, host=True)
-    yield bus
-    bus.close()
-
-
-@pytest.fixture
-def make_client(hub, bus_params):
-    opened: list[Bus] = []
-
-    def make(node: str) -> Bus:
-        bus = Bus("test", node, bus_params)
-        opened.append(bus)
-        return bus
-
-    yield make
-    for bus in opened:
-        bus.close()
 
 
 class Processes:
