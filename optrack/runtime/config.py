@@ -85,6 +85,16 @@ NODE_PARAMS = register(
                 "latency, fewer frames. Negative: always the newest frame due.",
             ),
             Param(
+                "max_future_s",
+                0.1,
+                min=0.0,
+                max=10.0,
+                step=0.01,
+                unit="s",
+                help="The tracker node refuses (and counts) detections stamped further ahead "
+                "of its clock than this: a node whose clock is not synchronised yet, or jumped.",
+            ),
+            Param(
                 "tracks_publish",
                 "update",
                 choices=("update", "rate"),

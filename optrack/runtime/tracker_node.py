@@ -98,6 +98,7 @@ class TrackerNode(Node):
         self.clock_server = ClockServer(bus, clock)
         self.batches = 0
         self.refused = 0
+        self.future = 0  # refused: stamped ahead of this clock
         self.published = 0
         self.repeats = 0
         self.tracks = 0
@@ -188,8 +189,20 @@ class TrackerNode(Node):
 
     def _track(self, batch: DetectionBatch) -> bool:
         """One batch through the tracker and into the smoother; False when refused or late."""
+        now = self.clock()
+        ahead = batch.stamp - now
+        if ahead > float(self.node_params.max_future_s):
+            self.future += 1
+            self._refuse(
+                batch.sensor_id,
+                f"detections of sensor '{batch.sensor_id}' are stamped {ahead * 1000.0:.0f} ms "
+                "ahead of the tracker's clock, so they are not used: that node's clock is not "
+                "synchronised with the tracker yet (or jumped); if this goes on, run NTP "
+                "(chrony) on its computer.",
+            )
+            return False
         try:
-            tracks = self.tracker.update(batch, now=self.clock())
+            tracks = self.tracker.update(batch, now=now)
         except UserError as error:  # e.g. detections not in the world frame
             self._refuse(batch.sensor_id, str(error))
             return False
@@ -243,6 +256,7 @@ class TrackerNode(Node):
             "published": self.published,
             "repeats": self.repeats,
             "refused_batches": self.refused,
+            "future_batches": self.future,
             "sink_errors": self.sink_errors,
             "latency_p95_ms": self._latency.percentile(95) * 1000.0,
             "clock_requests": self.clock_server.requests,

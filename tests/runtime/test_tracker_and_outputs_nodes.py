@@ -124,6 +124,27 @@ def test_uncalibrated_detections_are_refused_with_the_trackers_sentence(site, ma
     assert "give the detector the calibration" in tracker.last_error
 
 
+def test_detections_stamped_ahead_of_the_tracker_clock_are_refused_and_counted(site, make_client):
+    """A node not synchronised yet (its clock 0.5 s ahead) must not move the tracker's
+    time forward; once its stamps are in tracker time its detections are used."""
+    tracker, _ = site
+    camera = make_client("cams")
+    time.sleep(0.2)
+    camera.publish(camera.keys.detections("cam0"), person(0, 0, "cam0", time.time() + 0.5))
+    deadline = time.monotonic() + 3
+    while tracker.future == 0 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert (tracker.future, tracker.refused, tracker.batches) == (1, 1, 0)
+    assert "sensor 'cam0' are stamped" in tracker.last_error
+    assert "ahead of the tracker's clock" in tracker.last_error
+    assert tracker.status_fields()["values"]["future_batches"] == 1
+    camera.publish(camera.keys.detections("cam0"), person(0, 0, "cam0", time.time()))
+    deadline = time.monotonic() + 3
+    while tracker.batches == 0 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert (tracker.batches, tracker.future) == (1, 1)
+
+
 def test_the_tracker_keeps_the_calibration_for_nodes_that_start_later(site, make_client):
     tracker, _ = site
     gui = make_client("gui")
