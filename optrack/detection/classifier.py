@@ -48,6 +48,11 @@ class HogClassifier:
         self.w = detector[:-1].ravel()
         self.b = float(detector[-1])  # OpenCV's rho: the last coefficient
 
+    def score(self, window: np.ndarray) -> float:
+        """SVM score of one 64x128 uint8 window (grey or 3-channel)."""
+        descriptor = self.hog.compute(np.ascontiguousarray(window)).ravel()
+        return float(descriptor.astype(np.float64) @ self.w + self.b)
+
     def scores(self, windows: list[np.ndarray]) -> np.ndarray:
         """SVM scores of 64x128 uint8 windows (grey or 3-channel)."""
         if not windows:
@@ -127,12 +132,14 @@ def person_window(
     full image's ``origin`` (u, v) and whose pixels are ``stride`` apart.
     """
     u0, v0 = origin
-    full_to_crop = np.array(
-        [[1.0 / stride, 0.0, -u0 / stride], [0.0, 1.0 / stride, -v0 / stride], [0.0, 0.0, 1.0]]
-    )
+    if (u0, v0, stride) != (0, 0, 1):
+        full_to_crop = np.array(
+            [[1.0 / stride, 0.0, -u0 / stride], [0.0, 1.0 / stride, -v0 / stride], [0.0, 0.0, 1.0]]
+        )
+        window_to_image = full_to_crop @ window_to_image
     return cv2.warpPerspective(
         image,
-        full_to_crop @ window_to_image,
+        window_to_image,
         HOG_WINDOW,
         flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
         borderMode=cv2.BORDER_CONSTANT,
@@ -142,7 +149,9 @@ def person_window(
 
 def luminance(image: np.ndarray) -> float:
     """Mean luminance (0-255) of an RGB image (OpenPTrack's 0.3 R + 0.59 G + 0.11 B)."""
-    return float(np.asarray(cv2.mean(image)[:3]) @ LUMA)
+    pixels = max(image.shape[0] * image.shape[1], 1)
+    # cv2.sumElems over cv2.mean: the same means, a tenth of the time on 3 channels.
+    return float(np.asarray(cv2.sumElems(image)[:3]) @ LUMA) / pixels
 
 
 def equalised_infrared(infrared: np.ndarray) -> np.ndarray:
@@ -161,4 +170,4 @@ def hsv_histogram(rgb_pixels: np.ndarray, hue_bins: int, saturation_bins: int) -
     )
     hist = cv2.calcHist([hsv], [0, 1], None, [hue_bins, saturation_bins], [0, 180, 0, 256]).ravel()
     total = float(hist.sum())
-    return [float(v) / total for v in hist] if total > 0 else []
+    return (hist.astype(np.float64) / total).tolist() if total > 0 else []

@@ -15,11 +15,12 @@ floor, x runs left to right as the camera sees, so tilt is compensated.
 from __future__ import annotations
 
 import dataclasses
+import math
 
+import cv2
 import numpy as np
-from scipy import ndimage
 from scipy.signal import find_peaks
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
@@ -27,6 +28,7 @@ from optrack.params import Params
 
 __all__ = [
     "Candidate",
+    "TallColumns",
     "cluster_point_limits",
     "euclidean_clusters",
     "head_based_subclusters",
@@ -98,10 +100,12 @@ def euclidean_clusters(
     n = len(points)
     if n == 0:
         return []
-    pairs = cKDTree(points, balanced_tree=False).query_pairs(tolerance, output_type="ndarray")
-    graph = coo_matrix(
-        (np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n)
+    pairs = cKDTree(points, balanced_tree=False, copy_data=False).query_pairs(
+        tolerance, output_type="ndarray"
     )
+    # A float64 CSR graph is what connected_components works on: built directly, it
+    # skips SciPy's conversions (a third of the clustering's time on a Kinect v2 frame).
+    graph = csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
     counts = np.bincount(labels)
     kept = np.flatnonzero((counts >= min_points) & (counts <= max_points))
@@ -112,36 +116,88 @@ def euclidean_clusters(
     return [order[starts[k] : starts[k] + counts[k]] for k in kept]
 
 
+class TallColumns:
+    """The floor columns holding a point higher than ``max_height`` (walls, cupboards).
+
+    The floor (ground-frame x, y) is cut into ``cell``-sized columns; a column
+    is tall when one of ``points`` in it is higher than ``max_height``, and it is
+    taken as solid from its lowest point up. The points come as their ``x``,
+    ``y`` and ``z`` arrays (ground frame, z up; float32 will do: only columns are
+    told apart). ``in_tall`` marks the points standing in a tall column;
+    :meth:`near` tells which points (these, or others such as the voxel
+    centroids of the rest) come within ``tolerance`` of one: a tall column within
+    ``tolerance`` on the floor reaches down to ``tolerance`` above the point (a
+    minimum filter over the grid of the tall columns' lowest points).
+    """
+
+    def __init__(
+        self,
+        x: np.ndarray,
+        y: np.ndarray,
+        z: np.ndarray,
+        cell: float,
+        max_height: float,
+        tolerance: float,
+    ) -> None:
+        self.cell, self.tolerance = float(cell), float(tolerance)
+        z = np.ascontiguousarray(z)
+        high = z > max_height
+        self.found = bool(high.any())
+        self.in_tall = np.zeros(len(z), dtype=bool)
+        if not self.found:
+            return
+        # Flat indices into a (rows x cols) grid of columns: 1-D arrays throughout (a
+        # strided Nx2 reduction or a 2-D ``ufunc.at`` costs several times more).
+        i = np.floor(x * (1.0 / cell)).astype(np.int64)
+        j = np.floor(y * (1.0 / cell)).astype(np.int64)
+        self.i0, self.j0 = int(i.min()), int(j.min())
+        i -= self.i0
+        j -= self.j0
+        self.rows, self.cols = int(i.max()) + 1, int(j.max()) + 1
+        column = i * self.cols + j
+        tall = np.zeros(self.rows * self.cols, dtype=bool)
+        tall[column[high]] = True
+        self.in_tall = tall[column]
+        bottom = np.full(len(tall), np.inf, dtype=z.dtype)  # lowest point of each tall column
+        np.minimum.at(bottom, column[self.in_tall], z[self.in_tall])  # same dtypes: fast path
+        # The lowest point of any tall column within the tolerance: a minimum filter over
+        # a square of columns (OpenCV's grey-scale erosion; beyond the grid nothing is tall).
+        size = 2 * int(np.ceil(tolerance / cell)) + 1
+        self.reach_down = cv2.erode(
+            bottom.reshape(self.rows, self.cols),
+            np.ones((size, size), dtype=np.uint8),
+            borderType=cv2.BORDER_CONSTANT,
+            borderValue=np.inf,
+        ).ravel()
+        self._tall = tall
+        self._column, self._z = column, z
+
+    def near(self, points: np.ndarray | None = None) -> np.ndarray:
+        """Which ``points`` (default: the ones the columns were found from) are not in a
+        tall column and come within the tolerance of one."""
+        if not self.found:
+            return np.zeros(len(points) if points is not None else len(self.in_tall), dtype=bool)
+        if points is None:
+            column, z, outside = self._column, self._z, None
+        else:
+            i = np.floor(points[:, 0] * (1.0 / self.cell)).astype(np.int64) - self.i0
+            j = np.floor(points[:, 1] * (1.0 / self.cell)).astype(np.int64) - self.j0
+            outside = (i < 0) | (i >= self.rows) | (j < 0) | (j >= self.cols)
+            column = np.clip(i, 0, self.rows - 1) * self.cols + np.clip(j, 0, self.cols - 1)
+            z = points[:, 2]
+        near = ~self._tall[column] & (self.reach_down[column] <= z + self.tolerance)
+        if outside is not None:
+            near &= ~outside  # off the grid: no column there is tall
+        return near
+
+
 def tall_columns(
     points: np.ndarray, cell: float, max_height: float, tolerance: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Which points stand in a tall column, and which others come within
-    ``tolerance`` of one (two boolean masks).
-
-    The floor (x, y) is cut into ``cell``-sized columns; a column is tall when
-    it holds a point higher than ``max_height`` (a wall, a cupboard), and it is
-    taken as solid from its lowest point up. A point comes near it when a tall
-    column within ``tolerance`` on the floor reaches down to ``tolerance``
-    above the point (SciPy's minimum filter over the grid of the tall columns'
-    lowest points).
-    """
-    n = len(points)
-    in_tall, touching = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
-    high = points[:, 2] > max_height
-    if not high.any():
-        return in_tall, touching
-    ij = np.floor(points[:, :2] * (1.0 / cell)).astype(np.int64)
-    ij -= ij.min(axis=0)
-    shape = tuple(ij.max(axis=0) + 1)
-    tall = np.zeros(shape, dtype=bool)
-    tall[ij[high, 0], ij[high, 1]] = True
-    in_tall = tall[ij[:, 0], ij[:, 1]]
-    bottom = np.full(shape, np.inf, dtype=np.float32)  # lowest point of each tall column
-    np.minimum.at(bottom, (ij[in_tall, 0], ij[in_tall, 1]), points[in_tall, 2])
-    size = 2 * int(np.ceil(tolerance / cell)) + 1
-    reach_down = ndimage.minimum_filter(bottom, size=size, mode="constant", cval=np.inf)
-    touching = ~in_tall & (reach_down[ij[:, 0], ij[:, 1]] <= points[:, 2] + tolerance)
-    return in_tall, touching
+    ``tolerance`` of one (two boolean masks; see :class:`TallColumns`)."""
+    columns = TallColumns(points[:, 0], points[:, 1], points[:, 2], cell, max_height, tolerance)
+    return columns.in_tall, columns.near()
 
 
 def _merge_close(
@@ -181,22 +237,26 @@ def _head_maxima(
     noise on a flat top (a partition, a cupboard) makes no heads."""
     x, z = points[:, 0], points[:, 2]
     bins = ((x - x.min()) / bin_size).astype(np.int64)
-    order = np.lexsort((z, bins))  # by bin, then height: the last of each bin is its top
-    sorted_bins = bins[order]
-    last = np.flatnonzero(np.r_[sorted_bins[1:] != sorted_bins[:-1], True])
-    profile = np.zeros(int(bins.max()) + 1)  # empty bins are valleys, as PCL's zeros
+    # The profile with an empty (zero-height) bin at each end, so that the ends can be
+    # maxima too; empty bins are valleys, as PCL's zeros.
+    padded = np.full(int(bins.max()) + 3, -np.inf)
+    np.maximum.at(padded, bins + 1, z)
+    padded[np.isinf(padded)] = 0.0
+    profile = padded[1:-1]
     top_point = np.full(len(profile), -1)
-    profile[sorted_bins[last]] = z[order[last]]
-    top_point[sorted_bins[last]] = order[last]
-    # The ends can be maxima too: pad with empty (zero-height) bins.
-    peaks, _ = find_peaks(np.r_[0.0, profile, 0.0], prominence=prominence)
+    tops = np.flatnonzero(z == profile[bins])
+    top_point[bins[tops]] = tops  # the last (highest index) of a bin's top points
+    peaks, _ = find_peaks(padded, prominence=prominence)
     peaks = peaks - 1
     peaks = peaks[np.argsort(-profile[peaks], kind="stable")]
     kept: list[int] = []
-    for peak in peaks:
-        here = points[top_point[peak], :2]
-        if all(np.linalg.norm(here - points[k, :2]) >= min_distance for k in kept):
-            kept.append(int(top_point[peak]))
+    kept_xy: list[tuple[float, float]] = []
+    for peak in peaks.tolist():
+        top = int(top_point[peak])
+        hx, hy = float(points[top, 0]), float(points[top, 1])
+        if all(math.hypot(hx - kx, hy - ky) >= min_distance for kx, ky in kept_xy):
+            kept.append(top)
+            kept_xy.append((hx, hy))
     return np.array(kept, dtype=np.int64)
 
 
@@ -227,7 +287,9 @@ def head_based_subclusters(
     return parts
 
 
-def person_candidates(points: np.ndarray, params: Params) -> list[Candidate]:
+def person_candidates(
+    points: np.ndarray, params: Params, touching: np.ndarray | None = None
+) -> list[Candidate]:
     """Person candidates among floor-free voxels (ground frame, z up).
 
     PCL's chain: Euclidean clustering (tolerance ``cluster_tolerance`` voxel
@@ -236,6 +298,10 @@ def person_candidates(points: np.ndarray, params: Params) -> list[Candidate]:
     clusters by heads when large enough; then keep candidates whose height
     and width are within the person limits and that have a head: their top
     ``head_fraction`` is narrower than ``max_head_ratio`` of their extent.
+
+    ``touching`` given, the tall columns are already out of ``points`` and it
+    marks the points that come within the tolerance of one (:class:`TallColumns`
+    found on the points before the voxel grid, as the detector does).
     """
     head_fraction = float(params.head_fraction)
     min_points, max_points = cluster_point_limits(params)
@@ -245,9 +311,10 @@ def person_candidates(points: np.ndarray, params: Params) -> list[Candidate]:
     # holding such a point (walls, cupboards: most of the points) are left out of the
     # clustering, and clusters that come within the tolerance of them are dropped, as
     # they would have joined them.
-    in_tall, touching = tall_columns(points, float(params.voxel_size), max_height, tolerance)
-    rest = ~in_tall
-    points, touching = points[rest], touching[rest]
+    if touching is None:
+        in_tall, touching = tall_columns(points, float(params.voxel_size), max_height, tolerance)
+        rest = ~in_tall
+        points, touching = points[rest], touching[rest]
     clusters = [
         Candidate.from_points(points[idx], head_fraction)
         for idx in euclidean_clusters(points, tolerance, max(min_points, 1), max_points)

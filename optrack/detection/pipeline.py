@@ -36,7 +36,7 @@ from optrack.detection.classifier import (
     person_window,
     window_footprint,
 )
-from optrack.detection.clustering import Candidate, person_candidates
+from optrack.detection.clustering import Candidate, TallColumns, person_candidates
 from optrack.detection.ground import (
     FIT_POINTS,
     GroundEstimator,
@@ -225,14 +225,29 @@ class PeopleDetector:
             self.ground.refit(floor, count)
         plane = self.ground.plane
         assert plane is not None
-        foreground = voxel_grid(points, float(p.voxel_size))
-        if p.background_subtraction:
+        g_T_c = ground_T_camera(plane)
+        voxel = float(p.voxel_size)
+        if p.background_subtraction:  # PCL's order: the background goes before the walls
+            foreground = voxel_grid(points, voxel)
             if self.background.learning and self.background.learn(foreground, stamp):
                 pass  # still learning: this frame is detected without subtraction
             else:
                 foreground = foreground[self.background.foreground(foreground)]
-        g_T_c = ground_T_camera(plane)
-        candidates = person_candidates(_transform(g_T_c, foreground), p)
+            candidates = person_candidates(_transform(g_T_c, foreground), p)
+        else:
+            # Walls and cupboards (tall columns, most of the points) are found on the
+            # points and left out before the voxel grid, not voxelised and then dropped.
+            r, t = g_T_c[:3, :3].astype(np.float32), g_T_c[:3, 3].astype(np.float32)
+            x, y, z = points[:, 0], points[:, 1], points[:, 2]
+            columns = TallColumns(
+                *(x * r[k, 0] + y * r[k, 1] + z * r[k, 2] + t[k] for k in range(3)),
+                voxel,
+                float(p.max_height),
+                float(p.cluster_tolerance) * voxel,
+            )
+            foreground = voxel_grid(np.compress(~columns.in_tall, points, axis=0), voxel)
+            voxels = _transform(g_T_c, foreground)
+            candidates = person_candidates(voxels, p, touching=columns.near(voxels))
         if not candidates:
             return batch([])
 
@@ -295,11 +310,12 @@ class PeopleDetector:
         p = self.params
         plane = self.ground.plane
         assert plane is not None
-        hx, hy = candidate.head
+        hx, hy = float(candidate.head[0]), float(candidate.head[1])
         height = candidate.height
-        top_c, bottom_c, center_c = _transform(
-            c_T_g, np.array([[hx, hy, height], [hx, hy, 0.0], [hx, hy, height / 2.0]])
-        )
+        # Head top, floor and centre on the person's axis, camera frame.
+        up_c = c_T_g[:3, 2]
+        bottom_c = c_T_g[:3, 0] * hx + c_T_g[:3, 1] * hy + c_T_g[:3, 3]
+        top_c, center_c = bottom_c + up_c * height, bottom_c + up_c * (height / 2.0)
         pixels, _ = project(np.stack([top_c, bottom_c, center_c]), cloud.intrinsics)
         fill = float(p.hog_window_fill)
         to_depth = level_window(center_c, height, plane.normal, cloud.intrinsics.K, fill)
@@ -309,21 +325,27 @@ class PeopleDetector:
         stride = max(1, round(person_px / fill / CROP_ROWS))
         u0, v0, u1, v1 = window_footprint(to_depth, cloud.shape)
 
-        def candidate_pixels() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-            """A strided crop of the window (camera and ground frame), its valid pixels,
-            and the candidate's own: near its axis, above the floor, below its head."""
+        def candidate_pixels() -> tuple[
+            tuple[np.ndarray, ...], tuple[np.ndarray, ...], np.ndarray, np.ndarray
+        ]:
+            """A strided crop of the window (x, y, z in the camera and in the ground
+            frame), its valid pixels, and the candidate's own: near its axis, above the
+            floor, below its head."""
             if u1 > u0 and v1 > v0:
-                crop_c = cloud.grid(slice(v0, v1, stride), slice(u0, u1, stride))
-                crop_g = _transform(g_T_c, crop_c)
+                crop_c = cloud.components(slice(v0, v1, stride), slice(u0, u1, stride))
+                x, y, z = crop_c
+                r, t = g_T_c[:3, :3], g_T_c[:3, 3]  # as _transform, without stacking
+                crop_g = tuple(x * r[k, 0] + y * r[k, 1] + z * r[k, 2] + t[k] for k in range(3))
             else:
-                crop_c = crop_g = np.full((0, 0, 3), np.nan)
-            valid = np.isfinite(crop_g[..., 2])
+                crop_c = crop_g = tuple(np.full((0, 0), np.nan) for _ in range(3))
+            gx, gy, gz = crop_g
+            valid = np.isfinite(gz)
             with np.errstate(invalid="ignore"):
                 mask = (
                     valid
-                    & (np.hypot(crop_g[..., 0] - hx, crop_g[..., 1] - hy) < float(p.person_radius))
-                    & (crop_g[..., 2] > float(p.ground_inlier_distance))
-                    & (crop_g[..., 2] < height + float(p.voxel_size))
+                    & (np.hypot(gx - hx, gy - hy) < float(p.person_radius))
+                    & (gz > float(p.ground_inlier_distance))
+                    & (gz < height + float(p.voxel_size))
                 )
             return crop_c, crop_g, valid, mask
 
@@ -332,7 +354,7 @@ class PeopleDetector:
             crop = candidate_pixels()
             silhouette = (crop[3] * np.uint8(255)).astype(np.uint8)
             window = person_window(silhouette, to_depth, (u0, v0), stride)
-            score = float(self.hog.scores([window])[0])
+            score = self.hog.score(window)
             accepted = score > float(p.min_depth_confidence)
         else:
             assert image is not None
@@ -341,7 +363,7 @@ class PeopleDetector:
                 if image_intrinsics is cloud.intrinsics
                 else level_window(center_c, height, plane.normal, image_intrinsics.K, fill)
             )
-            score = float(self.hog.scores([person_window(image, to_image)])[0])
+            score = self.hog.score(person_window(image, to_image))
             accepted = score > float(p.min_confidence)
 
         # Flags and histogram, of accepted candidates only (the others are not output).
@@ -355,7 +377,7 @@ class PeopleDetector:
             occluded = self._occluded(
                 crop_g,
                 valid,
-                candidate,
+                (hx, hy),
                 pixels,
                 (u0, v0),
                 stride,
@@ -366,7 +388,7 @@ class PeopleDetector:
                 if color_intrinsics is cloud.intrinsics:  # registered: the same pixels
                     person_colors = color[v0:v1:stride, u0:u1:stride][mask]
                 else:
-                    uv, _ = project(crop_c[mask], color_intrinsics)
+                    uv, _ = project(np.stack([c[mask] for c in crop_c], axis=1), color_intrinsics)
                     u = np.rint(uv[:, 0]).astype(np.int64)
                     v = np.rint(uv[:, 1]).astype(np.int64)
                     inside = (u >= 0) & (u < color.shape[1]) & (v >= 0) & (v < color.shape[0])
@@ -381,9 +403,10 @@ class PeopleDetector:
         bx1 = min(cols_img, int(pixels[2][0] + box_w / 2.0))
         by1 = min(rows_img, int(pixels[2][1] + box_h / 2.0))
         compensation = float(p.centroid_depth_compensation)
-        camera_xyz = center_c * (1.0 + compensation / float(np.linalg.norm(center_c)))
+        cx, cy, cz = (float(v) for v in center_c)
+        camera_xyz = center_c * (1.0 + compensation / math.sqrt(cx * cx + cy * cy + cz * cz))
         pose = self.world_T_camera if self.world_T_camera is not None else g_T_c
-        position = _transform(pose, camera_xyz)
+        position = pose[:3, :3] @ camera_xyz + pose[:3, 3]
         detection = Detection(
             x=float(position[0]),
             y=float(position[1]),
@@ -412,9 +435,9 @@ class PeopleDetector:
 
     def _occluded(
         self,
-        crop_g: np.ndarray,
+        crop_g: tuple[np.ndarray, ...],
         valid: np.ndarray,
-        candidate: Candidate,
+        head: tuple[float, float],
         pixels: np.ndarray,
         origin: tuple[int, int],
         stride: int,
@@ -425,23 +448,23 @@ class PeopleDetector:
         (head to floor, ``person_radius`` either side of its axis) show something above
         the floor and nearer to the sensor than the person by ``occlusion_margin``."""
         p = self.params
-        if crop_g.size == 0:
+        gx, gy, gz = crop_g
+        if gz.size == 0:
             return False
-        hx, hy = candidate.head
-        person_range = math.hypot(hx, hy)  # the camera stands over the ground frame's origin
+        person_range = math.hypot(*head)  # the camera stands over the ground frame's origin
         u0, v0 = origin
         half = float(p.person_radius) * intrinsics.fx / max(depth, 1e-6)
         c0 = max(0, int((pixels[2][0] - half - u0) / stride))
-        c1 = min(crop_g.shape[1], int(math.ceil((pixels[2][0] + half - u0) / stride)))
+        c1 = min(gz.shape[1], int(math.ceil((pixels[2][0] + half - u0) / stride)))
         r0 = max(0, int((pixels[0][1] - v0) / stride))
-        r1 = min(crop_g.shape[0], int(math.ceil((pixels[1][1] - v0) / stride)))
+        r1 = min(gz.shape[0], int(math.ceil((pixels[1][1] - v0) / stride)))
         if c1 <= c0 or r1 <= r0:
             return False
-        body = crop_g[r0:r1, c0:c1]
+        body = (slice(r0, r1), slice(c0, c1))
         with np.errstate(invalid="ignore"):
             nearer = (
-                valid[r0:r1, c0:c1]
-                & (body[..., 2] > float(p.ground_inlier_distance))
-                & (np.hypot(body[..., 0], body[..., 1]) < person_range - float(p.occlusion_margin))
+                valid[body]
+                & (gz[body] > float(p.ground_inlier_distance))
+                & (np.hypot(gx[body], gy[body]) < person_range - float(p.occlusion_margin))
             )
         return float(np.count_nonzero(nearer)) / nearer.size > float(p.occlusion_fraction)

@@ -9,6 +9,8 @@ voxel grid and the outlier removal.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import open3d as o3d
 
@@ -67,7 +69,7 @@ class OrganisedCloud:
         assert self._depth is not None
         raw = self._depth[rows, cols]
         if raw.dtype == np.uint16:
-            z = raw.astype(np.float32) * np.float32(self._scale)
+            z = np.multiply(raw, np.float32(self._scale), dtype=np.float32)
             z[raw == 0] = np.nan
             return z
         z = raw.astype(np.float32, copy=True)
@@ -81,6 +83,16 @@ class OrganisedCloud:
         z = self.z(rows, cols).astype(np.float64)
         x_over_z, y_over_z = pixel_rays(self.intrinsics, *self.shape)
         return np.stack([x_over_z[rows, cols] * z, y_over_z[rows, cols] * z, z], axis=-1)
+
+    def components(self, rows: slice, cols: slice) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """x, y and z (hxw float64 each, NaN where invalid) of a strided window: the
+        values of :meth:`grid`, without stacking them."""
+        if self._points is not None:
+            window = self._points[rows, cols]
+            return tuple(window[..., k].astype(np.float64) for k in range(3))  # type: ignore[return-value]
+        z = self.z(rows, cols).astype(np.float64)
+        x_over_z, y_over_z = pixel_rays(self.intrinsics, *self.shape)
+        return x_over_z[rows, cols] * z, y_over_z[rows, cols] * z, z
 
     def xyz(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Camera-frame points (Nx3 float64) of the pixels (rows[i], cols[i])."""
@@ -163,26 +175,56 @@ def split_at_floor(
         return np.compress(above, points, axis=0), points[floor[::step]], len(floor)
     window = (slice(None, None, s), slice(None, None, s))
     z = cloud.z(*window)
-    x_over_z, y_over_z = pixel_rays(cloud.intrinsics, *cloud.shape)
-    x_over_z, y_over_z = x_over_z[window], y_over_z[window]
+    x_over_z, y_over_z = _window_rays(cloud.intrinsics, cloud.shape, s)
     a, b, c, d = plane
+    if cloud.intrinsics.has_distortion:
+        ray = x_over_z * a + y_over_z * b
+    else:  # x/z is the same down a column and y/z along a row: the same sums, broadcast
+        ray = x_over_z[:1] * a + y_over_z[:, :1] * b
+    ray += c
     with np.errstate(invalid="ignore"):
-        heights = z * (x_over_z * a + y_over_z * b + c).astype(np.float32) + np.float32(d)
+        heights = z * ray.astype(np.float32)
+        heights += np.float32(d)
         keep = z <= max_distance  # NaN (no depth) compares False
         if confidence is not None and confidence_threshold > 0:
             keep &= confidence[window] >= confidence_threshold
-        above = keep & (heights > floor_distance) & (heights < top)
-        floor = keep & (np.abs(heights) < floor_distance)
+        above = heights > floor_distance
+        above &= heights < top
+        above &= keep
+        floor = np.abs(heights) < floor_distance
+        floor &= keep
 
-    def points_at(mask: np.ndarray | tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-        depth = z[mask]
-        return np.stack([x_over_z[mask] * depth, y_over_z[mask] * depth, depth], axis=1).astype(
-            np.float32
-        )
+    def points_at(pixels: np.ndarray) -> np.ndarray:
+        """Points (Nx3 float32) of a mask of the window, or of flat indices into it."""
+        depth = z.ravel()[pixels] if pixels.ndim == 1 else z[pixels]
+        points = np.empty((len(depth), 3), dtype=np.float32)
+        for k, ray in enumerate((x_over_z, y_over_z)):
+            np.multiply(
+                ray.ravel()[pixels] if pixels.ndim == 1 else ray[pixels],
+                depth,
+                out=points[:, k],
+                casting="same_kind",
+            )
+        points[:, 2] = depth
+        return points
 
-    rows, cols = np.nonzero(floor)
-    step = max(1, len(rows) // fit_points)
-    return points_at(above), points_at((rows[::step], cols[::step])), len(rows)
+    floor_pixels = np.flatnonzero(floor)
+    step = max(1, len(floor_pixels) // fit_points)
+    return points_at(above), points_at(floor_pixels[::step]), len(floor_pixels)
+
+
+@functools.lru_cache(maxsize=16)
+def _window_rays(
+    intrinsics: Intrinsics, shape: tuple[int, int], s: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~optrack.geometry.pixel_rays` of every ``s``-th pixel in rows and columns,
+    contiguous (read-only, kept per sensor): masks pick from them in one pass."""
+    x_over_z, y_over_z = pixel_rays(intrinsics, *shape)
+    window = (slice(None, None, s), slice(None, None, s))
+    rays = tuple(np.ascontiguousarray(r[window]) for r in (x_over_z, y_over_z))
+    for r in rays:
+        r.setflags(write=False)
+    return rays  # type: ignore[return-value]
 
 
 def voxel_grid(points: np.ndarray, voxel_size: float) -> np.ndarray:

@@ -9,6 +9,7 @@ import pytest
 from optrack.detection import detection_params
 from optrack.detection.clustering import (
     Candidate,
+    TallColumns,
     cluster_point_limits,
     euclidean_clusters,
     head_based_subclusters,
@@ -108,6 +109,26 @@ def test_tall_columns_mark_walls_and_what_touches_them():
     n_wall, n_touching = len(wall), len(touching)
     assert in_tall[:n_wall].all() and not in_tall[n_wall:].any()
     assert near[n_wall : n_wall + n_touching].all() and not near[n_wall + n_touching :].any()
+
+
+def test_tall_columns_found_on_the_points_judge_the_voxels_of_the_rest():
+    # As the detector does: the columns from the points, then near() on voxel centroids.
+    wall = block(1.0, 1.05, 0.0, 1.0, 0.1, 2.4)
+    low = block(0.5, 0.6, 0.4, 0.6, 0.5, 1.0)
+    points = np.concatenate([wall, low])
+    columns = TallColumns(*points.T.astype(np.float32), 0.06, 2.3, 0.12)
+    assert columns.in_tall[: len(wall)].all() and not columns.in_tall[len(wall) :].any()
+    voxels = np.array(
+        [
+            [0.93, 0.5, 0.8],  # 0.07 m from the wall, lower than its bottom + tolerance
+            [0.55, 0.5, 0.8],  # 0.45 m from it
+            [0.93, 0.5, -0.5],  # next to it but far below its lowest point
+            [9.0, 9.0, 1.0],  # off the grid of columns
+        ]
+    )
+    assert columns.near(voxels).tolist() == [True, False, False, False]
+    floor_only = TallColumns(*low.T, 0.06, 2.3, 0.12)  # nothing above max_height
+    assert not floor_only.in_tall.any() and not floor_only.near(voxels).any()
 
 
 def test_width_limits_apply():

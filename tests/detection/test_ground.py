@@ -15,6 +15,7 @@ from optrack.detection.ground import (
     automatic_ground,
     check_ground,
     combine_with_calibration,
+    fit_plane,
     ground_from_calibration,
     ground_from_pixels,
     ground_from_points,
@@ -165,6 +166,17 @@ def test_floor_is_refitted_each_frame_unless_locked():
     locked = GroundEstimator(detection_params(overrides={"lock_ground": True}), plane=start)
     locked.update(moved_floor)
     assert locked.plane.d == pytest.approx(2.0, abs=1e-9)
+
+
+def test_the_per_frame_refit_is_the_total_least_squares_plane():
+    camera, _ = floor_cloud(height=2.0, tilt_deg=25, noise=0.01)
+    fitted = fit_plane(camera.astype(np.float32))
+    reference = Plane.fit(camera)
+    assert fitted.angle_deg(reference) < 1e-6 or fitted.angle_deg(reference) > 180 - 1e-6
+    assert abs(fitted.distance(np.zeros(3))) == pytest.approx(abs(reference.d), abs=1e-6)
+    line = np.outer(np.linspace(0.0, 1.0, 10), [1.0, 2.0, 3.0])
+    assert fit_plane(line) is None
+    assert fit_plane(camera[:2]) is None
 
 
 def test_estimator_waits_for_a_frame_with_enough_depth():
