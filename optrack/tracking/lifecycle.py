@@ -3,7 +3,9 @@
 A track is born NEW from a detection no track took (with enough confidence),
 is validated after ``detections_to_validate`` detections that confident (or, born
 from weaker detections, after ``weak_detections_to_validate`` detections in a
-row: seen weakly but steadily, like a person behind furniture), becomes NORMAL
+row: seen weakly but steadily, like a person behind furniture; a weak
+detection the detector flags partly out of the image weighs in a run as a
+confident one), becomes NORMAL
 ``sec_remain_new`` after its birth, MISSING when no sensor has detected it for
 ``sec_before_missing``, and is deleted ``sec_before_old`` after its last
 detection. A track never validated is deleted as fake ``sec_before_fake``
@@ -56,7 +58,8 @@ class TrackState:
     validated: bool = False
     detections: int = 0
     confident_detections: int = 0  # with at least min_confidence_initialization
-    #: per sensor, detections in a row (reset by a frame of that sensor that misses the track)
+    #: per sensor, detections in a row, weighted by :func:`_run_weights` (reset by a frame of
+    #: that sensor that misses the track)
     runs: dict[str, int] = dataclasses.field(default_factory=dict)
     streak: int = 0  # detections since the last gap of sec_before_missing
     confirmed: float = -np.inf  # last detection of a run long enough to trust
@@ -74,9 +77,20 @@ class TrackState:
 
 
 def on_detected(
-    track: TrackState, t: float, confidence: float, height: float, sensor: str, params: Any
+    track: TrackState,
+    t: float,
+    confidence: float,
+    height: float,
+    sensor: str,
+    params: Any,
+    hidden: bool = False,
 ) -> None:
-    """A detection (stamped t, possibly late) was associated to the track."""
+    """A detection (stamped t, possibly late) was associated to the track.
+
+    ``hidden``: the detector flagged the detection partly hidden in a way that
+    explains a weak confidence (``out_of_view``: partly outside the image; see
+    ``explained_weak_detections``): in a run it weighs as a confident detection.
+    """
     track.detections += 1
     confident = confidence >= params.min_confidence_initialization
     if confident:
@@ -90,11 +104,13 @@ def on_detected(
     weak_floor = min(
         params.min_confidence_initialization, params.min_confidence_weak_initialization
     )
+    strong_weight, weak_weight, run_to_validate = _run_weights(params)
     if confidence >= weak_floor:
-        track.runs[sensor] = track.runs.get(sensor, 0) + 1
+        weight = strong_weight if confident or hidden else weak_weight
+        track.runs[sensor] = track.runs.get(sensor, 0) + weight
     track.confidence = confidence
     track.height += (height - track.height) / track.detections
-    steady = sum(track.runs.values()) >= params.weak_detections_to_validate
+    steady = sum(track.runs.values()) >= run_to_validate
     if not track.validated and (
         track.confident_detections >= params.detections_to_validate or steady
     ):
@@ -108,6 +124,17 @@ def on_detected(
             if track.last_detection - track.born >= params.sec_remain_new
             else TrackStatus.NEW
         )
+
+
+def _run_weights(params: Any) -> tuple[int, int, int]:
+    """(strong weight, weak weight, run that validates), integers: a weak, unexplained
+    detection weighs 1 / weak_detections_to_validate of a validating run, a confident or
+    explained one 1 / detections_to_validate (of the two counts, the smaller)."""
+    strong_needed = min(params.detections_to_validate, params.weak_detections_to_validate)
+    weak_needed = params.weak_detections_to_validate
+    # 1/strong_needed and 1/weak_needed, both scaled by strong_needed * weak_needed
+    strong_weight, weak_weight = weak_needed, strong_needed
+    return strong_weight, weak_weight, weak_needed * strong_needed
 
 
 def on_missed(track: TrackState, sensor: str, t: float) -> None:

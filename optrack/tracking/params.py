@@ -184,6 +184,15 @@ TRACKING_PARAMS = register(
                 "it missing it) to be validated on weak detections alone.",
             ),
             Param(
+                "explained_weak_detections",
+                "out_of_view",
+                choices=("out_of_view", "out_of_view_or_occluded", "none"),
+                help="Weak detections whose low HOG margin the detector's flags explain (part of "
+                "the person outside the image; or also behind something nearer) weigh as "
+                "confident ones in a run of detections in a row. 'occluded' is off by default: "
+                "the detector also flags furniture behind furniture occluded, in runs.",
+            ),
+            Param(
                 "sec_before_fake",
                 2.4,
                 min=0.1,

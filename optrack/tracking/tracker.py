@@ -298,7 +298,15 @@ class Tracker:
     ) -> None:
         track.x, track.P, track.t = x, P, state_time
         record_position(track, t, self.p.max_detection_delay + 2 * self.p.velocity_baseline)
-        on_detected(track, t, detection.confidence, detection.height, sensor, self.p)
+        on_detected(
+            track,
+            t,
+            detection.confidence,
+            detection.height,
+            sensor,
+            self.p,
+            _hidden(detection, self.p.explained_weak_detections),
+        )
 
     # -------------------------------------------------------------- appearance
     def _missing_candidates(self, t: float, skip: set[int]) -> list[int]:
@@ -490,7 +498,9 @@ class Tracker:
             )
             self.next_id += 1
             record_position(track, t, p.max_detection_delay + 2 * p.velocity_baseline)
-            on_detected(track, t, d.confidence, d.height, sensor, p)
+            on_detected(
+                track, t, d.confidence, d.height, sensor, p, _hidden(d, p.explained_weak_detections)
+            )
             if features is not None and np.all(np.isfinite(features[j])):
                 track.features.append(features[j])
             self.tracks.append(track)
@@ -573,6 +583,17 @@ def _last_seen(track: TrackState) -> tuple[float, float]:
     if track.history:
         return track.history[-1][1], track.history[-1][2]
     return float(track.x[0]), float(track.x[1])
+
+
+def _hidden(detection: Detection, explained: str) -> bool:
+    """Whether the detector flagged the detection partly hidden in a way that explains a weak
+    HOG margin (``explained_weak_detections``): partly outside the image, or also behind
+    something nearer to the sensor."""
+    if explained == "none":
+        return False
+    if explained == "out_of_view_or_occluded" and detection.occluded:
+        return True
+    return detection.out_of_view
 
 
 def _sensor_distances(detections: list[Detection]) -> np.ndarray:

@@ -10,8 +10,10 @@ from optrack.types import Detection, DetectionBatch, TrackStatus
 RATE = 30.0
 
 
-def _batch(t: float, *xs: float, confidence: float = 1.0, sensor: str = "a") -> DetectionBatch:
-    people = [Detection(x=x, y=0.0, z=0.9, height=1.7, confidence=confidence) for x in xs]
+def _batch(
+    t: float, *xs: float, confidence: float = 1.0, sensor: str = "a", **flags: bool
+) -> DetectionBatch:
+    people = [Detection(x=x, y=0.0, z=0.9, height=1.7, confidence=confidence, **flags) for x in xs]
     return DetectionBatch(sensor_id=sensor, stamp=t, detections=people)
 
 
@@ -140,6 +142,69 @@ def test_a_flickering_weak_detection_is_never_published() -> None:
         tracker.update(_batch(k / RATE, *([1.0] if k % 2 == 0 else []), confidence=0.2))
         assert tracker.output().tracks == []
     assert len(tracker.tracks) == 1  # alive (never unseen for sec_before_missing), unpublished
+
+
+@pytest.mark.parametrize(
+    ("explained", "flag"),
+    [
+        ("out_of_view", "out_of_view"),
+        ("out_of_view_or_occluded", "out_of_view"),
+        ("out_of_view_or_occluded", "occluded"),
+    ],
+)
+def test_a_weak_detection_flagged_partly_hidden_is_published_after_detections_to_validate_in_a_row(
+    explained: str, flag: str
+) -> None:
+    """The detector says why the margin is low (the image's edge, or something in front):
+    such weak detections in a row validate as fast as confident ones."""
+    tracker = Tracker(TRACKING_PARAMS.create({**WEAK, "explained_weak_detections": explained}))
+    needed = tracker.params.detections_to_validate
+    assert needed < tracker.params.weak_detections_to_validate
+    _run(tracker, 0.0, (needed - 1) / RATE, 1.0, confidence=0.2, **{flag: True})
+    assert tracker.output().tracks == []
+    tracker.update(_batch((needed - 1) / RATE, 1.0, confidence=0.2, **{flag: True}))
+    assert [t.id for t in tracker.output().tracks] == [1]
+
+
+@pytest.mark.parametrize(
+    ("explained", "flag"),
+    [("out_of_view", "occluded"), ("none", "out_of_view"), ("none", "occluded")],
+)
+def test_a_weak_detection_whose_flag_is_not_trusted_needs_weak_detections_to_validate(
+    explained: str, flag: str
+) -> None:
+    """By default 'occluded' explains nothing: furniture behind furniture is flagged too."""
+    assert TRACKING_PARAMS.create().explained_weak_detections == "out_of_view"
+    tracker = Tracker(TRACKING_PARAMS.create({**WEAK, "explained_weak_detections": explained}))
+    needed = tracker.params.weak_detections_to_validate
+    _run(tracker, 0.0, (needed - 1) / RATE, 1.0, confidence=0.2, **{flag: True})
+    assert tracker.output().tracks == []
+    tracker.update(_batch((needed - 1) / RATE, 1.0, confidence=0.2, **{flag: True}))
+    assert [t.id for t in tracker.output().tracks] == [1]
+
+
+def test_a_flickering_weak_detection_flagged_partly_hidden_is_never_published() -> None:
+    """A flagged false alarm that flickers makes no run, even with both flags trusted."""
+    tracker = Tracker(
+        TRACKING_PARAMS.create({**WEAK, "explained_weak_detections": "out_of_view_or_occluded"})
+    )
+    for k in range(60):
+        people = [1.0] if k % 2 == 0 else []
+        flags = {"occluded": True} if k % 4 == 0 else {"out_of_view": True}
+        tracker.update(_batch(k / RATE, *people, confidence=0.2, **flags))
+        assert tracker.output().tracks == []
+
+
+def test_a_run_of_weak_then_partly_hidden_detections_adds_up() -> None:
+    """Each detection in a run counts its share: a weak one 1/weak_detections_to_validate,
+    a flagged one 1/detections_to_validate (7 weak + 1 flagged = 0.7 + 0.33 >= 1)."""
+    tracker = Tracker(TRACKING_PARAMS.create(WEAK))
+    p = tracker.params
+    assert (p.detections_to_validate, p.weak_detections_to_validate) == (3, 10)
+    _run(tracker, 0.0, 7 / RATE, 1.0, confidence=0.2)
+    assert tracker.output().tracks == []
+    tracker.update(_batch(7 / RATE, 1.0, confidence=0.2, out_of_view=True))
+    assert [t.id for t in tracker.output().tracks] == [1]
 
 
 def test_frames_of_another_sensor_do_not_break_a_sensors_run() -> None:
