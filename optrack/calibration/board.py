@@ -52,13 +52,24 @@ CORNER_PARAMS = register(
             ),
             Param(
                 "subpix_window_fraction",
-                0.4,
+                0.6,
                 min=0.0,
                 max=2.0,
                 step=0.05,
                 help="The sub-pixel window's half-size stays below this fraction of the corner "
-                "spacing, so that it never reaches the next corner (0: always subpix_window, "
-                "as OpenCV's calibration sample).",
+                "spacing, so that it never reaches the grid lines through the neighbouring "
+                "corners (0: always subpix_window, as OpenCV's calibration sample).",
+            ),
+            Param(
+                "subpix_border_fraction",
+                0.35,
+                min=0.0,
+                max=2.0,
+                step=0.05,
+                help="Corners of the outermost rows and columns: the window's half-size also "
+                "stays below this fraction of the corner spacing, so that it never reaches "
+                "the outer edge of the outer squares, which printed boards often cut short "
+                "(0: no extra limit).",
             ),
             Param(
                 "subpix_iterations",
@@ -224,7 +235,7 @@ def to_gray(image: np.ndarray) -> np.ndarray:
 
 
 def _subpix_window(
-    corners: np.ndarray, board: Checkerboard, largest: int, fraction: float = 0.4
+    corners: np.ndarray, board: Checkerboard, largest: int, fraction: float = 0.6
 ) -> int:
     """Half-size of cornerSubPix's window: below ``fraction`` of the smallest corner
     spacing (``largest`` when ``fraction`` is 0)."""
@@ -236,6 +247,46 @@ def _subpix_window(
         float(np.min(np.linalg.norm(np.diff(grid, axis=0), axis=2))),
     )
     return int(max(2, min(largest, math.floor(fraction * spacing))))
+
+
+def _border_mask(board: Checkerboard) -> np.ndarray:
+    """True for the corners of the outermost rows and columns (board order)."""
+    grid = np.zeros((board.rows, board.cols), dtype=bool)
+    grid[[0, -1], :] = True
+    grid[:, [0, -1]] = True
+    return grid.ravel()
+
+
+def _subpix_windows(corners: np.ndarray, board: Checkerboard, p: Params) -> tuple[int, int]:
+    """(inner, border) half-sizes of cornerSubPix's window for ``corners`` (any order that
+    keeps rows and columns, as findChessboardCorners returns them)."""
+    inner = _subpix_window(corners, board, int(p.subpix_window), float(p.subpix_window_fraction))
+    border_fraction = float(p.subpix_border_fraction)
+    if border_fraction <= 0:
+        return inner, inner
+    return inner, min(inner, _subpix_window(corners, board, int(p.subpix_window), border_fraction))
+
+
+def _corner_subpix(
+    gray: np.ndarray,
+    corners: np.ndarray,
+    board: Checkerboard,
+    windows: tuple[int, int],
+    criteria: tuple[int, int, float],
+) -> np.ndarray:
+    """cornerSubPix with one window for the inner corners and one for the border corners."""
+    start = np.ascontiguousarray(corners.reshape(-1, 2), dtype=np.float32)
+    refined = start.copy()
+    inner, border = windows
+    groups = [(np.ones(len(start), dtype=bool), inner)]
+    if border != inner:
+        mask = _border_mask(board)
+        groups = [(~mask, inner), (mask, border)]
+    for mask, window in groups:
+        refined[mask] = cv2.cornerSubPix(
+            gray, start[mask].reshape(-1, 1, 2), (window, window), (-1, -1), criteria
+        ).reshape(-1, 2)
+    return refined
 
 
 def _canonical_order(corners: np.ndarray, gray: np.ndarray, board: Checkerboard) -> np.ndarray:
@@ -295,7 +346,10 @@ def find_corners(
     sub-pixel accuracy in the original, unequalised image (equalising moves
     edges), or in the upsampled one when the squares are too small for a
     3-pixel window, and returned in the original image's pixels (pixel
-    centres at integers).
+    centres at integers). The window of a corner of the outermost rows and
+    columns is kept smaller (``subpix_border_fraction``): the outer squares of
+    a printed board are often cut short, and a window that reaches their cut
+    edge pulls the corner off by pixels.
     """
     p = params if params is not None else CORNER_PARAMS.create()
     gray = to_gray(image)  # linear in the light: sub-pixel refinement works on this one
@@ -323,19 +377,15 @@ def find_corners(
         float(p.subpix_epsilon),
     )
     native = (corners + 0.5) / scale - 0.5
-    fraction = float(p.subpix_window_fraction)
-    window = _subpix_window(native, board, int(p.subpix_window), fraction)
-    if scale > 1 and window < 3:  # squares too small here: refine where they are larger
-        window = _subpix_window(corners, board, int(p.subpix_window), fraction)
+    windows = _subpix_windows(native, board, p)
+    if scale > 1 and min(windows) < 3:  # squares too small here: refine where they are larger
         larger = cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_CUBIC)
-        refined = cv2.cornerSubPix(
-            larger, corners.reshape(-1, 1, 2), (window, window), (-1, -1), criteria
-        ).reshape(-1, 2)
+        refined = _corner_subpix(
+            larger, corners, board, _subpix_windows(corners, board, p), criteria
+        )
         refined = (refined + 0.5) / scale - 0.5
     else:
-        refined = cv2.cornerSubPix(
-            gray, native.reshape(-1, 1, 2).astype(np.float32), (window, window), (-1, -1), criteria
-        ).reshape(-1, 2)
+        refined = _corner_subpix(gray, native, board, windows, criteria)
     return _canonical_order(refined, gray, board).astype(np.float64)
 
 
