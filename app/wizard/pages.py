@@ -845,6 +845,7 @@ class RefinementPage(WizardPage):
         self.report = report
         self.before.set_trajectories(report.trajectories_before)
         self.after.set_trajectories(report.trajectories_after)
+        refused, board = report.refused, report.board_rms_px
         self.figure.setText(
             f"The sensors disagree on where the person was by "
             f"{100 * report.error_before_m:.1f} cm on average before refinement and "
@@ -852,6 +853,17 @@ class RefinementPage(WizardPage):
             + (
                 f" Not refined (too few detections): {', '.join(report.skipped)}."
                 if report.skipped
+                else ""
+            )
+            + (
+                " Kept the checkerboard's pose for "
+                + ", ".join(
+                    f"{s} (the walk's correction puts its board views {rms:.1f} px off, "
+                    f"against {board.get(s, math.nan):.1f} px)"
+                    for s, rms in sorted(refused.items())
+                )
+                + ": the board is the more exact there."
+                if refused
                 else ""
             )
         )
@@ -956,13 +968,14 @@ class ReviewPage(WizardPage):
         self.file = calibration
         fair, good = self.calibration_wizard.view_thresholds("extrinsics")
         rows, levels = {}, {}
+        refused = str(calibration.quality.get("refinement_refused") or "").split(",")
         for sensor in sorted(calibration.sensors):
             entry = calibration.sensors[sensor]
             row = {
                 "views": str(entry.views),
                 "rms": _rms(entry.reprojection_rms_px),
                 "height": f"{entry.pose[2, 3]:.2f}",
-                "refinement": "not refined",
+                "refinement": "kept the board's pose" if sensor in refused else "not refined",
             }
             if entry.refinement is not None:
                 delta = np.asarray(entry.refinement, dtype=float)
@@ -988,6 +1001,11 @@ class ReviewPage(WizardPage):
                 f"{100 * float(quality['refinement_error_after_m']):.1f} cm "
                 f"({100 * float(quality['refinement_error_before_m']):.1f} cm before)"
             )
+            if quality.get("refinement_refused"):
+                parts.append(
+                    f"{str(quality['refinement_refused']).replace(',', ', ')} kept the "
+                    "checkerboard's pose (the walk's correction contradicted its board views)"
+                )
         else:
             parts.append("not refined")
         self.summary.setText("; ".join(parts) + ".")

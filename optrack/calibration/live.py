@@ -12,7 +12,8 @@ How it works::
            BoardViewMessage on board_views/<sensor> (tracker-time stamp, corners or
            none, on the floor or not, a small JPEG preview with the corners drawn)
         -> on a simulated site, command "operator" {action} to the site node: its
-           simulated operator moves the board / lays it on the floor / walks
+           simulated operator moves the board / shows it to the one sensor whose
+           intrinsics are wanted / lays it on the floor / walks
     board views --> still instants (session.py's still-board rule per sensor; sensors
            whose still intervals overlap saw the same board pose) -->
            NetworkCalibrator.add(...) (iSAM2 live feedback)
@@ -61,10 +62,12 @@ from optrack.calibration.network import (
 from optrack.calibration.refinement import (
     REFINEMENT_PARAMS,
     Trajectory,
+    alignment_error,
     refine_from_trajectories,
 )
 from optrack.calibration.session import SESSION_PARAMS
 from optrack.errors import UserError
+from optrack.geometry import invert
 from optrack.net.bus import Bus
 from optrack.net.messages import (
     BoardViewMessage,
@@ -97,7 +100,7 @@ PHASES = ("intrinsics", "extrinsics", "floor", "refinement")
 
 #: What the simulated operator does in each phase (optrack.runtime.calibration_capture).
 OPERATOR_ACTION = {
-    "intrinsics": "move_board",
+    "intrinsics": "show_board",
     "extrinsics": "move_board",
     "floor": "lay_board",
     "refinement": "walk",
@@ -166,6 +169,15 @@ LIVE_PARAMS = register(
                 max=7200.0,
                 unit="s",
                 help="The refinement phase keeps at most this many seconds of detections.",
+            ),
+            Param(
+                "refinement_board_growth",
+                0.25,
+                min=0.0,
+                max=100.0,
+                help="A walk's correction of a sensor is applied only while that sensor's "
+                "checkerboard views still agree with it: their reprojection RMS grows by at "
+                "most this fraction; else the sensor keeps the checkerboard's pose.",
             ),
         ],
         help="The live calibration against a running site (the wizard's backend).",
@@ -236,6 +248,12 @@ class RefinementReport:
     # (added) per-sensor 4x4 corrections applied in world x-y-z, and sensors skipped
     corrections: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     skipped: list[str] = dataclasses.field(default_factory=list)
+    # (added) sensors whose walk correction was not applied, with the reprojection RMS
+    # (px) their checkerboard views would have had with it; every sensor's RMS without
+    # the walk's correction and with it
+    refused: dict[str, float] = dataclasses.field(default_factory=dict)
+    board_rms_px: dict[str, float] = dataclasses.field(default_factory=dict)
+    board_rms_refined_px: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
 @dataclasses.dataclass
@@ -575,7 +593,7 @@ class LiveCalibration:
         self.stop()
         if self.simulated:
             self.phase_wanted = phase
-            self._operator(OPERATOR_ACTION[phase])
+            self._operator(OPERATOR_ACTION[phase], sensor)
         with self._lock:
             self.phase = phase
             self._phase_started = time.monotonic()
@@ -639,8 +657,9 @@ class LiveCalibration:
         self._poses = {}
         self._instants = self._floor_votes = 0
 
-    def _operator(self, action: str) -> None:
-        """Have the simulated operator act and wait for the nodes to run on its scene."""
+    def _operator(self, action: str, sensor: str | None = None) -> None:
+        """Have the simulated operator act and wait for the nodes to run on its scene
+        (``sensor``: the one it shows the board to, for the intrinsics)."""
         reply = send_command(
             self.bus,
             "site",
@@ -651,6 +670,7 @@ class LiveCalibration:
                 "rows": self.board.rows,
                 "square": self.board.square,
                 "pairs": action == "move_board" and self.phase_wanted == "extrinsics",
+                "sensor": sensor or "",
             },
             self._timeout(),
         )
@@ -880,7 +900,10 @@ class LiveCalibration:
         """Algorithm 1 (optrack/calibration/refinement.py) from the walker's per-sensor
         detections collected in the refinement phase (camera-frame centroids moved into the
         world by the solved calibration; the most confident one per frame), starting from
-        the solved calibration. The report's calibration becomes the one saved/published."""
+        the solved calibration. A sensor's correction is applied only while its checkerboard
+        views still agree with it (``calibration_live.refinement_board_growth``; the report's
+        ``refused`` lists the others, which keep the board's pose). The report's calibration
+        becomes the one saved/published."""
         with self._lock:
             base = self.calibration
             batches = {s: list(b) for s, b in self._detections.items()}
@@ -905,32 +928,89 @@ class LiveCalibration:
             if times:
                 trajectories[sid] = Trajectory(np.asarray(times), np.asarray(points))
         progress(0.2, f"Algorithm 1 over {len(trajectories)} sensors")
-        result = refine_from_trajectories(trajectories, REFINEMENT_PARAMS.create())
-        refined = base
+        p = REFINEMENT_PARAMS.create()
+        result = refine_from_trajectories(trajectories, p)
+        # The checkerboard's views are millimetre evidence, a walker's detections centimetre
+        # evidence: a correction that its sensor's board views contradict is not applied.
+        board_before = self._board_rms({s: base.pose(s) for s in result.corrections})
+        board_after = self._board_rms({s: c @ base.pose(s) for s, c in result.corrections.items()})
+        growth = 1.0 + float(self.params.refinement_board_growth)
+        corrections, refused = {}, {}
         for sid, correction in result.corrections.items():
+            if sid in board_after and board_after[sid] > board_before[sid] * growth:
+                refused[sid] = board_after[sid]
+            else:
+                corrections[sid] = correction
+        after = {
+            s: tr.transformed(corrections[s]) if s in corrections else tr
+            for s, tr in trajectories.items()
+        }
+        error_after = (
+            alignment_error(
+                {s: tr for s, tr in after.items() if s in result.corrections}, float(p.max_gap)
+            )
+            if refused
+            else result.error_after_m
+        )
+        refined = base
+        for sid, correction in corrections.items():
             refined = refined.with_pose(sid, correction @ base.pose(sid))
         refined = msgspec.structs.replace(refined, notes=new_calibration_id(), created=now_iso())
         report = RefinementReport(
             calibration=refined,
             error_before_m=result.error_before_m,
-            error_after_m=result.error_after_m,
+            error_after_m=error_after,
             trajectories_before={s: tr.xyz.copy() for s, tr in trajectories.items()},
-            trajectories_after={
-                s: tr.transformed(result.corrections[s]).xyz if s in result.corrections else tr.xyz
-                for s, tr in trajectories.items()
-            },
-            corrections={s: c.copy() for s, c in result.corrections.items()},
+            trajectories_after={s: tr.xyz.copy() for s, tr in after.items()},
+            corrections={s: c.copy() for s, c in corrections.items()},
             skipped=list(result.skipped),
+            refused=refused,
+            board_rms_px=board_before,
+            board_rms_refined_px=board_after,
         )
         with self._lock:
             self.refinement = report
             self.calibration = refined
             self._message = (
-                f"Refined: sensors agree within {result.error_after_m * 100:.1f} cm "
+                f"Refined: sensors agree within {error_after * 100:.1f} cm "
                 f"(before: {result.error_before_m * 100:.1f} cm)."
             )
+            if refused:
+                self._message += (
+                    f" {', '.join(sorted(refused))} kept the checkerboard's pose: the walk "
+                    "moved it where its board views disagree."
+                )
         progress(1.0, self._message)
         return report
+
+    def _board_rms(self, poses: dict[str, np.ndarray]) -> dict[str, float]:
+        """(added) Per sensor, the reprojection RMS (px, pinhole corners) of its checkerboard
+        views in the last solve with the camera at ``poses[sensor]`` and every board where
+        the solve put it: how far a pose is from what the board showed that sensor."""
+        with self._lock:
+            calibrator, result = self.calibrator, self.result
+        if calibrator is None or result is None:
+            return {}
+        objects = self.board.object_points
+        errors: dict[str, list[np.ndarray]] = {}
+        for instant in calibrator.instants:
+            world_T_board = result.world_T_board.get(instant.index)
+            if world_T_board is None:
+                continue
+            for sid in instant.added & set(poses):
+                camera_T_board = invert(poses[sid]) @ world_T_board
+                points = objects @ camera_T_board[:3, :3].T + camera_T_board[:3, 3]
+                k = calibrator.intrinsics[sid]
+                uv = np.stack(
+                    [
+                        k.fx * points[:, 0] / points[:, 2] + k.cx,
+                        k.fy * points[:, 1] / points[:, 2] + k.cy,
+                    ],
+                    axis=1,
+                )
+                residual = np.linalg.norm(uv - instant.views[sid].pinhole, axis=1)
+                errors.setdefault(sid, []).append(residual)
+        return {s: float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for s, e in errors.items()}
 
     # ----------------------------------------------------------------- output
     def calibration_file(self) -> CalibrationFile:
@@ -962,6 +1042,8 @@ class LiveCalibration:
             if refinement is not None:
                 quality["refinement_error_before_m"] = refinement.error_before_m
                 quality["refinement_error_after_m"] = refinement.error_after_m
+                if refinement.refused:  # (added) sensors that kept the checkerboard's pose
+                    quality["refinement_refused"] = ",".join(sorted(refinement.refused))
         return CalibrationFile(
             sensors=sensors,
             id=calibration.notes or new_calibration_id(),
@@ -1165,6 +1247,7 @@ def cmd_live(args: Any) -> int:
                 "error_before_m": report.error_before_m,
                 "error_after_m": report.error_after_m,
                 "skipped": report.skipped,
+                "refused": report.refused,
             }
         if args.json:
             sys.stdout.write(json.dumps(payload) + "\n")

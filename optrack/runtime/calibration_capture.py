@@ -17,14 +17,15 @@ it. The GUI never receives full frames.
 
 Site side (:class:`SimulatedOperator`, in ``optrack run`` when every sensor
 is simulated). The ``operator`` command of the ``site`` node, ``{action:
-move_board | lay_board | walk | people | status}``, restarts the detector
-nodes on live simulated sensors of a scene made from the site's own scenario
-(same venue, same sensors, so the same true poses) with the operator doing
-what the calibration wizard asks: carrying the board to places where each
-sensor and each neighbouring pair sees it (``move_board``), laying it on the
-floor at ``floor_places`` places (``lay_board``), or one person walking
-through every view (``walk``); ``people`` goes back to the site's own
-sensors (the venue). The scenes are rendered live, so the nodes run at the
+move_board | show_board | lay_board | walk | people | status}``, restarts the
+detector nodes on live simulated sensors of a scene made from the site's own
+scenario (same venue, same sensors, so the same true poses) with the operator
+doing what the calibration wizard asks: carrying the board to places where
+each sensor and each neighbouring pair sees it (``move_board``), showing it
+to one ``sensor`` all over its image, turned many ways (``show_board``, the
+intrinsics page), laying it on the floor at ``floor_places`` places
+(``lay_board``), or one person walking through every view (``walk``);
+``people`` goes back to the site's own sensors (the venue). The scenes are rendered live, so the nodes run at the
 rate ray casting allows (a few frames per second on 2 cores; their status
 shows it): enough for the capture, which needs a few per second.
 """
@@ -70,7 +71,7 @@ __all__ = [
 log = logging.getLogger("optrack.runtime.calibration_capture")
 
 CAPTURE_PHASES = ("intrinsics", "extrinsics", "floor")
-OPERATOR_ACTIONS = ("move_board", "lay_board", "walk", "people", "status")
+OPERATOR_ACTIONS = ("move_board", "show_board", "lay_board", "walk", "people", "status")
 
 CAPTURE_PARAMS = register(
     Schema(
@@ -158,6 +159,24 @@ OPERATOR_PARAMS = register(
                 unit="s",
                 help="The simulated operator holds the board still this long at each place "
                 "(a few searches of every node must fall in it; slow computers need longer).",
+            ),
+            Param(
+                "intrinsics_places",
+                9,
+                min=1,
+                max=40,
+                step=1,
+                help="Places the simulated operator shows the board at for one sensor's "
+                "intrinsics (show_board), each turned another way.",
+            ),
+            Param(
+                "intrinsics_hold_s",
+                1.5,
+                min=0.2,
+                max=60.0,
+                unit="s",
+                help="The simulated operator holds the board this long at each intrinsics "
+                "place (one still view is kept per place; the board needs no partner).",
             ),
             Param(
                 "command_timeout_s",
@@ -657,10 +676,11 @@ class SimulatedOperator:
         bus.serve(bus.keys.command("site"), CommandRequest, answer)
 
     def command(self, args: dict[str, Any]) -> dict[str, Any]:
-        """``{action, cols, rows, square, places, pairs}`` -> ``{action, scene}``; the nodes
-        restart on the scene in the background (their status ``sensor`` names the scene;
-        a scene that cannot be made is ``operator.error`` in the site status). ``pairs``
-        (move_board): skip the placements facing one sensor (the extrinsics need pairs)."""
+        """``{action, cols, rows, square, places, pairs, sensor}`` -> ``{action, scene}``;
+        the nodes restart on the scene in the background (their status ``sensor`` names
+        the scene; a scene that cannot be made is ``operator.error`` in the site status).
+        ``pairs`` (move_board): skip the placements facing one sensor (the extrinsics need
+        pairs). ``sensor`` (show_board): the detector node whose intrinsics are wanted."""
         action = str(args.get("action", ""))
         if action not in OPERATOR_ACTIONS:
             raise CaptureError(
@@ -670,7 +690,16 @@ class SimulatedOperator:
         if action == "status":
             return {"action": self.action, "scene": self.scene, "actions": list(OPERATOR_ACTIONS)}
         board = None
-        if action in ("move_board", "lay_board"):
+        shown = -1
+        if action == "show_board":
+            names = {name: index for name, index in self.sensors}
+            shown = names.get(str(args.get("sensor", "")), -1)
+            if shown < 0:
+                raise CaptureError(
+                    f"the simulated operator shows the board to one of the site's sensors "
+                    f"({', '.join(names)}); got {args.get('sensor')!r}."
+                )
+        if action in ("move_board", "show_board", "lay_board"):
             board = _board_from({"cols": 6, "rows": 5, "square": 0.15, **args})
             board.require_asymmetric()
         places = int(args.get("places", self.params.floor_places))
@@ -682,18 +711,24 @@ class SimulatedOperator:
             scene = "" if action == "people" else f"operator-{self.count}-{action}"
             self.action, self.scene, self.error = action, scene, ""
         threading.Thread(
-            target=self._prepare, args=(action, scene, board, places, pairs), daemon=True
+            target=self._prepare, args=(action, scene, board, places, pairs, shown), daemon=True
         ).start()
         return {"action": action, "scene": scene}
 
     def _prepare(
-        self, action: str, scene: str, board: Checkerboard | None, places: int, pairs: bool
+        self,
+        action: str,
+        scene: str,
+        board: Checkerboard | None,
+        places: int,
+        pairs: bool,
+        shown: int = -1,
     ) -> None:
         try:
             uris = (
                 [""] * len(self.sensors)
                 if action == "people"
-                else self._scene_uris(action, scene, board, places, pairs)
+                else self._scene_uris(action, scene, board, places, pairs, shown)
             )
             with self._lock:
                 if self.scene != scene:  # a newer command came meanwhile
@@ -728,7 +763,13 @@ class SimulatedOperator:
             raise CaptureError(problems[0])
 
     def _scene_uris(
-        self, action: str, scene: str, board: Checkerboard | None, places: int, pairs: bool
+        self,
+        action: str,
+        scene: str,
+        board: Checkerboard | None,
+        places: int,
+        pairs: bool,
+        shown: int = -1,
     ) -> list[str]:
         from optrack.sim.scenario import BoardSpec, PeopleSpec
         from optrack.sim.venue import Venue
@@ -746,6 +787,8 @@ class SimulatedOperator:
                 rows=board.rows,
                 square=board.square,
                 floor_placements=places if action == "lay_board" else 0,
+                intrinsics_sensor=shown,
+                intrinsics_placements=int(p.intrinsics_places),
             )
         derived = msgspec.structs.replace(
             self.base,
@@ -766,7 +809,8 @@ class SimulatedOperator:
         start = time.time() + float(p.lead_s) - skip
         extra = "".join(f"&{k}={urllib.parse.quote(v)}" for k, v in sorted(self.options.items()))
         if spec is not None:
-            extra += f"&hold={float(p.hold_s):g}"
+            hold = float(p.intrinsics_hold_s if action == "show_board" else p.hold_s)
+            extra += f"&hold={hold:g}"
         return [
             f"sim://{path}/{index}?seed={self.seed}{extra}&start={start:.3f}&id={name}"
             for name, index in self.sensors

@@ -224,9 +224,17 @@ class DetectorNode(Node):
         frame = self.sensor.read()
         if frame is None:
             return False
-        # A replay stamps the instant each frame became due on this node's clock;
-        # any other sensor is stamped when its frame arrives here.
-        captured = frame.timestamp if isinstance(self.sensor, LiveReplay) else self.sync.clock()
+        # A replay stamps the instant each frame became due on this node's clock; a
+        # sensor stamping its captures on this computer's wall clock (Sensor.host_clock:
+        # a simulated one, which renders for a while after the capture) is stamped at the
+        # capture, the frame's age taken off the node's clock; any other sensor is
+        # stamped when its frame arrives here.
+        if isinstance(self.sensor, LiveReplay):
+            captured = frame.timestamp
+        elif getattr(self.sensor, "host_clock", False):
+            captured = self.sync.clock() - max(0.0, time.time() - frame.timestamp)
+        else:
+            captured = self.sync.clock()
         frame.timestamp = captured
         if self._last_seq is not None and frame.seq > self._last_seq + 1:
             self.dropped += frame.seq - self._last_seq - 1

@@ -64,6 +64,10 @@ class Sensor(abc.ABC):
     """
 
     uri: str = ""
+    #: (added) True when ``read()`` stamps each frame with this computer's wall clock
+    #: (``time.time()``) at its capture: a node then takes the capture time from the
+    #: stamp, not from the frame's arrival.
+    host_clock: bool = False
 
     @property
     @abc.abstractmethod

@@ -186,6 +186,14 @@ class SimulatedSensor(Sensor):
     def fps(self) -> float:
         return self._sensor.model.fps
 
+    @property
+    def host_clock(self) -> bool:  # type: ignore[override]
+        """(added) In real time on the wall clock, frames carry their capture time on this
+        computer's clock (rendering one takes a while after it: a node stamping arrivals
+        would stamp each sensor late by its own rendering time). A simulated camera with
+        a clock offset of its own is stamped on arrival, as an unsynchronised camera is."""
+        return self.real_time and self._clock is time and self._sensor.clock_offset == 0.0
+
     def open(self) -> None:
         if self._epoch is None:
             self._epoch = self.start_time if self.start_time is not None else self._clock.time()

@@ -41,6 +41,7 @@ __all__ = [
     "board_pose_facing",
     "neighbouring_pairs",
     "plan_board_steps",
+    "plan_intrinsics_steps",
 ]
 
 PROGRESS = 0.1  # m: walking nearer by less than this is no progress
@@ -405,8 +406,13 @@ def plan_board_steps(
     body_radius: float = 0.25,
 ) -> list[BoardStep]:
     """Board placements: one per sensor, one per neighbouring pair, then up to
-    ``spec.floor_placements`` on the floor. A placement no spot satisfies is skipped."""
+    ``spec.floor_placements`` on the floor. A placement no spot satisfies is skipped.
+    With ``spec.intrinsics_sensor`` set: :func:`plan_intrinsics_steps` for that sensor."""
     params = params if params is not None else BOARD_PARAMS.create()
+    if spec.intrinsics_sensor >= 0:
+        return plan_intrinsics_steps(
+            views, spec.intrinsics_sensor, venue, static_scene, spec, params, body_radius
+        )
     board = Checkerboard(spec, params)
     step, edge = float(params.grid_step), float(params.wall_clearance)
     xs = np.arange(-venue.half[0] + edge, venue.half[0] - edge + 1e-9, step)
@@ -493,6 +499,97 @@ def plan_board_steps(
             found = True
             break
         if not found:
+            break
+    return steps
+
+
+#: The intrinsics plan spreads the board's centre over this many image cells a side, and
+#: turns it (degrees left/right, up/down from facing the sensor) a different way each time.
+INTRINSICS_CELLS = 3
+INTRINSICS_TURNS = ((0, 0), (30, 0), (-30, 0), (0, 20), (0, -20), (25, 15), (-25, -15), (25, -15))
+
+
+def plan_intrinsics_steps(
+    views: list[SensorView],
+    index: int,
+    venue: Venue,
+    static_scene: o3d.t.geometry.RaycastingScene,
+    spec: BoardSpec,
+    params: Params | None = None,
+    body_radius: float = 0.25,
+) -> list[BoardStep]:
+    """Board placements for sensor ``index``'s intrinsics: ``spec.intrinsics_placements``
+    held boards that it sees whole, their centres spread over its image (a grid of
+    :data:`INTRINSICS_CELLS` cells) and each turned another way (:data:`INTRINSICS_TURNS`):
+    Zhang's calibration needs the plane at several orientations (Zhang 2000, section
+    3.3), and corners all over the image pin the distortion down. Each next placement is
+    the least used cell and turn, nearest to where the operator stands."""
+    params = params if params is not None else BOARD_PARAMS.create()
+    if not 0 <= index < len(views):
+        raise ValueError(f"sensor {index} is not one of the {len(views)} sensors")
+    view, board = views[index], Checkerboard(spec, params)
+    step, edge = float(params.grid_step), float(params.wall_clearance)
+    xs = np.arange(-venue.half[0] + edge, venue.half[0] - edge + 1e-9, step)
+    ys = np.arange(-venue.half[1] + edge, venue.half[1] - edge + 1e-9, step)
+    grid = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
+    heights = np.array([float(h) for h in str(params.hold_heights).split(",") if h.strip()])
+    base = np.concatenate([np.column_stack([grid, np.full(len(grid), h)]) for h in heights])
+    to_camera = view.world_T_camera[:3, 3] - base
+    heading = np.arctan2(to_camera[:, 1], to_camera[:, 0])
+    elevation = np.arctan2(to_camera[:, 2], np.linalg.norm(to_camera[:, :2], axis=1))
+    limit = math.radians(params.max_hold_tilt_deg)
+    centers, normals, turns = [], [], []
+    for k, (yaw, pitch) in enumerate(INTRINSICS_TURNS):
+        h = heading + math.radians(yaw)
+        e = np.clip(elevation + math.radians(pitch), -limit, limit)
+        centers.append(base)
+        normals.append(np.column_stack([np.cos(e) * np.cos(h), np.cos(e) * np.sin(h), np.sin(e)]))
+        turns.append(np.full(len(base), k))
+    centers_a, normals_a, turn = (
+        np.concatenate(centers),
+        np.concatenate(normals),
+        np.concatenate(turns),
+    )
+    horizontal = normals_a[:, :2] / np.maximum(
+        np.linalg.norm(normals_a[:, :2], axis=1, keepdims=True), 1e-9
+    )
+    lean = (board.center[1] - board.lo[1]) * np.abs(normals_a[:, 2])
+    spots = centers_a[:, :2] - (params.carry_distance + lean[:, None]) * horizontal
+    rotations = _facing_rotations(normals_a)
+    size = _square_pixels(view, rotations, centers_a, board, params, False)
+    ok = (size > 0) & venue.is_free(spots, body_radius + params.spot_clearance)
+    camera = transform_points(invert(view.world_T_camera), centers_a)
+    k = view.intrinsics
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.clip((k.fx * camera[:, 0] / camera[:, 2] + k.cx) / k.width, 0.0, 0.999)
+        v = np.clip((k.fy * camera[:, 1] / camera[:, 2] + k.cy) / k.height, 0.0, 0.999)
+    cell = np.where(ok, (v * INTRINSICS_CELLS).astype(int) * INTRINSICS_CELLS, 0)
+    cell += np.where(ok, (u * INTRINSICS_CELLS).astype(int), 0)
+    cell_uses = np.zeros(INTRINSICS_CELLS**2)
+    turn_uses = np.zeros(len(INTRINSICS_TURNS))
+    steps: list[BoardStep] = []
+    here: np.ndarray | None = None
+    open_ = ok.copy()
+    while len(steps) < spec.intrinsics_placements and open_.any():
+        walk = np.zeros(len(spots)) if here is None else np.linalg.norm(spots - here, axis=1)
+        sharp = np.minimum(size, params.square_px_wanted) / params.square_px_wanted
+        candidates = np.flatnonzero(open_)
+        keys = (walk - sharp, turn_uses[turn], cell_uses[cell])
+        order = candidates[np.lexsort(tuple(key[candidates] for key in keys))]
+        for c in order:
+            open_[c] = False
+            pose = make_pose(rotations[c], centers_a[c] - rotations[c] @ board.center)
+            if not _line_of_sight(static_scene, [view], transform_points(pose, board.outline)):
+                continue
+            bearing = math.atan2(horizontal[c, 1], horizontal[c, 0])
+            steps.append(BoardStep("hold", pose, spots[c], bearing, (index,)))
+            cell_uses[cell[c]] += 1
+            turn_uses[turn[c]] += 1
+            here = spots[c]
+            # The same spot, height and turn once only.
+            open_ &= ~(
+                (turn == turn[c]) & (np.linalg.norm(centers_a - centers_a[c], axis=1) < step)
+            )
             break
     return steps
 

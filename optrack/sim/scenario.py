@@ -204,6 +204,11 @@ class BoardSpec(_Spec):
     rows: int = 5
     square: float = 0.12
     floor_placements: int = 3
+    # (added) Intrinsics: the operator shows the board to this sensor alone (its index),
+    # at ``intrinsics_placements`` places across its image, each turned another way,
+    # instead of the network procedure; -1: the network procedure.
+    intrinsics_sensor: int = -1
+    intrinsics_placements: int = 9
 
 
 class Scenario(_Spec):
@@ -409,3 +414,9 @@ def check_scenario(scenario: Scenario) -> None:
             raise _fail(scenario, f"board.square must be 0.01-0.5 m; got {board.square}")
         if not 0 <= board.floor_placements <= 20:
             raise _fail(scenario, "board.floor_placements must be 0-20")
+        if board.intrinsics_sensor < -1 or not 1 <= board.intrinsics_placements <= 40:
+            raise _fail(
+                scenario,
+                "board.intrinsics_sensor must be a sensor index (or -1) and "
+                "board.intrinsics_placements 1-40",
+            )

@@ -186,12 +186,17 @@ def test_refinement_page_plots_trajectories_before_and_after_and_the_error_figur
         trajectories_before={"cam0": walk, "cam1": walk + 0.1},
         trajectories_after={"cam0": walk, "cam1": walk + 0.01},
         skipped=["cam2"],
+        refused={"cam3": 3.14},
+        board_rms_px={"cam3": 0.12},
     )
     page.report = report
     page._refined(report)
     assert set(page.before.curves) == set(page.after.curves) == {"cam0", "cam1"}
     assert "11.2 cm on average before refinement and 2.0 cm after" in page.figure.text()
     assert "cam2" in page.figure.text()
+    # A sensor whose board views the walk's correction contradicts keeps the board's pose.
+    assert "checkerboard's pose for cam3" in page.figure.text()
+    assert "3.1 px off, against 0.1 px" in page.figure.text()
     assert wizard.refined and wizard.calibration is report.calibration
 
 
@@ -216,6 +221,7 @@ def test_review_page_shows_each_sensors_quality_from_the_calibration_file(wizard
             "floor_views": 6,
             "refinement_error_before_m": 0.05,
             "refinement_error_after_m": 0.02,
+            "refinement_refused": "cam0",
         },
     )
     page = wizard.review_page
@@ -223,7 +229,7 @@ def test_review_page_shows_each_sensors_quality_from_the_calibration_file(wizard
     assert page.table.text("cam0", "views") == "40"
     assert page.table.text("cam1", "rms") == "0.31"
     assert page.table.text("cam1", "refinement") == "5.0 cm, 0.00°"
-    assert page.table.text("cam0", "refinement") == "not refined"
+    assert page.table.text("cam0", "refinement") == "kept the board's pose"
     assert page.table.text("cam0", "height") == "2.50"
     views = page.table.keys.index("views")
     assert (
@@ -232,5 +238,6 @@ def test_review_page_shows_each_sensors_quality_from_the_calibration_file(wizard
     )
     assert page.summary.text() == (
         "2 sensors calibrated; reprojection RMS 0.20 px; 6 floor views: the world's origin is "
-        "on the floor; refined from a walk: the sensors agree within 2.0 cm (5.0 cm before)."
+        "on the floor; refined from a walk: the sensors agree within 2.0 cm (5.0 cm before); "
+        "cam0 kept the checkerboard's pose (the walk's correction contradicted its board views)."
     )

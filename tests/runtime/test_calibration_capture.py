@@ -211,3 +211,56 @@ def test_the_simulated_operator_moves_every_node_into_a_scene_of_the_same_sensor
     finally:
         for node in nodes:
             node.close()
+
+
+def test_the_simulated_operator_shows_the_board_to_one_sensor_all_over_its_image(
+    hub, make_client, tmp_path
+):
+    """The intrinsics page's scene: every placement is seen whole by the one sensor asked
+    for, the board's centre in several cells of its image and turned several ways."""
+    from optrack.geometry import invert, transform_points
+
+    uris = [f"sim://calibration/{k}?sensors=2&id=cam{k}" for k in range(2)]
+    site = SITE_PARAMS.create({"sensors": ",".join(uris)})
+    operator = SimulatedOperator.for_site(site, uris, ["cam0", "cam1"], tmp_path)
+    operator.serve(hub)
+    nodes, switches = [], []
+    for k, uri in enumerate(uris):
+        node = Node(hub, f"cam{k}", NODE_PARAMS.create(), {})
+        switch = SceneSwitch(SimulatedSensor.from_uri(uri))
+        switch.register(node.add_command)
+        nodes.append(node)
+        switches.append(switch)
+    client = make_client("wizard")
+    try:
+        with pytest.raises(CommandError, match="one of the site's sensors"):
+            send_command(client, "site", "operator", {"action": "show_board", "sensor": "cam7"})
+        reply = send_command(
+            client, "site", "operator", {"action": "show_board", "sensor": "cam1", **BOARD}
+        )
+        assert reply["scene"].endswith("show_board")
+        deadline, sensor = time.monotonic() + 30, None
+        while sensor is None and time.monotonic() < deadline:
+            sensor = switches[1].take(lambda sentence: None)
+            time.sleep(0.05)
+        assert sensor is not None and reply["scene"] in sensor.info.uri
+    finally:
+        for node in nodes:
+            node.close()
+    steps = sensor.simulation.operator.steps
+    assert len(steps) == 9 and all(s.kind == "hold" and s.sensors == (1,) for s in steps)
+    assert sensor.simulation.operator.params.hold_seconds == 1.5
+    truth = Simulation("calibration", sensors=2).sensors[1]
+    k = truth.model.intrinsics
+    cells, turns = set(), []
+    for step in steps:
+        centre = transform_points(invert(truth.world_T_camera), step.world_T_board[:3, 3][None])[0]
+        u, v = k.fx * centre[0] / centre[2] + k.cx, k.fy * centre[1] / centre[2] + k.cy
+        assert 0 <= u < k.width and 0 <= v < k.height
+        cells.add((int(3 * u / k.width), int(3 * v / k.height)))
+        # The printed face looks along -z of the board; the angle it makes with the camera.
+        to_camera = truth.world_T_camera[:3, 3] - step.world_T_board[:3, 3]
+        cos = -step.world_T_board[:3, 2] @ to_camera / np.linalg.norm(to_camera)
+        turns.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    assert len(cells) >= 3
+    assert max(turns) - min(turns) >= 20.0

@@ -259,3 +259,59 @@ def test_preview_is_small_and_decodes_to_a_frame(node_setup, hub):
     assert cloud.shape == (500, 3)
     assert message.cloud_frame == "world"
     assert len(message.depth_png) + len(message.color_jpeg) + len(message.cloud) < 100_000
+
+
+class Delivered:
+    """A camera whose frames arrive ``delay_s`` after their capture, stamped then on this
+    computer's clock when ``host_clock`` (a simulated sensor renders after the capture)."""
+
+    def __init__(self, inner, delay_s: float, host_clock: bool) -> None:
+        self.inner, self.delay_s, self.host_clock = inner, delay_s, host_clock
+        self.captured = self.delivered = 0.0
+
+    @property
+    def info(self):
+        return self.inner.info
+
+    def read(self):
+        frame = self.inner.read()
+        frame.timestamp = self.captured = time.time()
+        time.sleep(self.delay_s)
+        self.delivered = time.time()
+        return frame
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+@pytest.mark.parametrize("host_clock", [True, False])
+def test_a_sensor_stamping_its_captures_on_this_clock_is_stamped_at_the_capture(
+    venue, hub, make_client, tmp_path, host_clock
+):
+    ClockServer(hub)
+    bus = make_client("kinect2_0")
+    sync = ClockSync(bus, CLOCK_PARAMS.create())
+    time.sleep(0.1)
+    sync.measure()
+    sensor = Delivered(LiveReplay(venue, "kinect2_0", loop=True), 0.3, host_clock)
+    node = DetectorNode(
+        bus,
+        sensor,
+        detection_params("kinect2"),
+        NODE_PARAMS.create({"preview_hz": 0.0}),
+        sync,
+        CalibrationStore(tmp_path / "state" / "kinect2_0"),
+    )
+    batches = Collector()
+    hub.subscribe(hub.keys.detections(), DetectionsMessage, batches)
+    time.sleep(0.3)
+    try:
+        node.step()
+        stamp = batches.wait_for(lambda m: m.batch.seq == 0)[-1].batch.stamp
+    finally:
+        node.close()
+    # Tracker time is this computer's clock here (one process; offset within milliseconds).
+    if host_clock:  # the capture, 0.3 s before the frame arrived
+        assert stamp == pytest.approx(sensor.captured, abs=0.05)
+    else:  # the arrival
+        assert stamp == pytest.approx(sensor.delivered, abs=0.05)
