@@ -45,7 +45,7 @@ from optrack.calibration.network import NETWORK_PARAMS, NetworkCalibrator
 from optrack.calibration.quality import calibration_errors
 from optrack.calibration.synthetic import perturb_poses, synthetic_session, synthetic_walk
 
-__all__ = ["bench_calibration"]
+__all__ = ["bench_calibration", "opencv_stereo_pose"]
 
 OPENCV_FX = 536.1  # the issue's reference for OpenCV's left*.jpg (left_intrinsics.yml: 535.9)
 
@@ -55,9 +55,32 @@ def _opencv_data() -> Path:
     return Path(optrack.__file__).resolve().parent.parent.parent / "shared" / "data" / "opencv"
 
 
+def opencv_stereo_pose(left, right, k_left, k_right, board, size) -> np.ndarray:
+    """right_T_left from cv2.stereoCalibrate with CALIB_FIX_INTRINSIC on the views both
+    cameras saw (``left``/``right``: per-view corners or None): the reference the network
+    solver's stereo pose is compared with."""
+    import cv2
+
+    from optrack.geometry import make_pose
+
+    pairs = [(a, b) for a, b in zip(left, right, strict=True) if a is not None and b is not None]
+    opencv = cv2.stereoCalibrate(
+        [board.object_points.astype(np.float32)] * len(pairs),
+        [a.reshape(-1, 1, 2).astype(np.float32) for a, _ in pairs],
+        [b.reshape(-1, 1, 2).astype(np.float32) for _, b in pairs],
+        k_left.K,
+        k_left.dist_coeffs,
+        k_right.K,
+        k_right.dist_coeffs,
+        size,
+        flags=cv2.CALIB_FIX_INTRINSIC,
+        criteria=(cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12),
+    )
+    return make_pose(opencv[5], opencv[6].ravel())
+
+
 def _stereo_figures(folder: Path) -> dict[str, Any]:
     """The left camera's intrinsics and the stereo pose against cv2.stereoCalibrate."""
-    import cv2
 
     from optrack.calibration.board import Checkerboard
     from optrack.calibration.commands import stereo_calibrate
@@ -72,21 +95,8 @@ def _stereo_figures(folder: Path) -> dict[str, Any]:
         for name, views in (("left", left), ("right", right))
     }
     ours = stereo_calibrate(left, right, board, size)
-    pairs = [(a, b) for a, b in zip(left, right, strict=True) if a is not None and b is not None]
     k_left, k_right = fits["left"].intrinsics, fits["right"].intrinsics
-    opencv = cv2.stereoCalibrate(
-        [board.object_points.astype(np.float32)] * len(pairs),
-        [a.reshape(-1, 1, 2).astype(np.float32) for a, _ in pairs],
-        [b.reshape(-1, 1, 2).astype(np.float32) for _, b in pairs],
-        k_left.K,
-        k_left.dist_coeffs,
-        k_right.K,
-        k_right.dist_coeffs,
-        size,
-        flags=cv2.CALIB_FIX_INTRINSIC,
-        criteria=(cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12),
-    )
-    reference = make_pose(opencv[5], opencv[6].ravel())
+    reference = opencv_stereo_pose(left, right, k_left, k_right, board, size)
     estimate = make_pose(np.asarray(ours["rotation"]), np.asarray(ours["translation"]))
     reference_baseline = float(np.linalg.norm(reference[:3, 3]))
     return {

@@ -58,6 +58,7 @@ from optrack.calibration.network import (
     CalibrationError,
     NetworkCalibrator,
     NetworkResult,
+    pinhole_residuals_px,
 )
 from optrack.calibration.refinement import (
     REFINEMENT_PARAMS,
@@ -999,16 +1000,9 @@ class LiveCalibration:
                 continue
             for sid in instant.added & set(poses):
                 camera_T_board = invert(poses[sid]) @ world_T_board
-                points = objects @ camera_T_board[:3, :3].T + camera_T_board[:3, 3]
-                k = calibrator.intrinsics[sid]
-                uv = np.stack(
-                    [
-                        k.fx * points[:, 0] / points[:, 2] + k.cx,
-                        k.fy * points[:, 1] / points[:, 2] + k.cy,
-                    ],
-                    axis=1,
+                residual = pinhole_residuals_px(
+                    objects, camera_T_board, calibrator.intrinsics[sid], instant.views[sid].pinhole
                 )
-                residual = np.linalg.norm(uv - instant.views[sid].pinhole, axis=1)
                 errors.setdefault(sid, []).append(residual)
         return {s: float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for s, e in errors.items()}
 

@@ -57,6 +57,7 @@ __all__ = [
     "NetworkResult",
     "SensorStatus",
     "observe_board",
+    "pinhole_residuals_px",
 ]
 
 NETWORK_PARAMS = register(
@@ -211,6 +212,20 @@ def observe_board(
         rms_px=rms,
         quality=quality,
     )
+
+
+def pinhole_residuals_px(
+    objects: np.ndarray, camera_T_board: np.ndarray, intrinsics: Intrinsics, pinhole: np.ndarray
+) -> np.ndarray:
+    """Distance in pixels between each board point (Nx3, board frame) projected through the
+    ideal pinhole camera of ``intrinsics`` and its undistorted corner (``BoardView.pinhole``)."""
+    points = objects @ camera_T_board[:3, :3].T + camera_T_board[:3, 3]
+    k = intrinsics
+    uv = np.stack(
+        [k.fx * points[:, 0] / points[:, 2] + k.cx, k.fy * points[:, 1] / points[:, 2] + k.cy],
+        axis=1,
+    )
+    return np.linalg.norm(uv - pinhole, axis=1)
 
 
 # ----------------------------------------------------------------- the tree
@@ -750,16 +765,9 @@ class NetworkCalibrator:
             board_T_network = values.atPose3(key).matrix()
             for sid in instant.added:
                 camera_T_board = invert(board_T_network @ cameras[sid])
-                points = objects @ camera_T_board[:3, :3].T + camera_T_board[:3, 3]
-                k = self.intrinsics[sid]
-                uv = np.stack(
-                    [
-                        k.fx * points[:, 0] / points[:, 2] + k.cx,
-                        k.fy * points[:, 1] / points[:, 2] + k.cy,
-                    ],
-                    axis=1,
+                errors = pinhole_residuals_px(
+                    objects, camera_T_board, self.intrinsics[sid], instant.views[sid].pinhole
                 )
-                errors = np.linalg.norm(uv - instant.views[sid].pinhole, axis=1)
                 per_sensor.setdefault(sid, []).append(errors)
         return {sid: np.concatenate(errors) for sid, errors in per_sensor.items()}
 

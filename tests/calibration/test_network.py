@@ -2,10 +2,10 @@ from __future__ import annotations
 
 import json
 
-import cv2
 import numpy as np
 import pytest
 
+from optrack.calibration.bench import opencv_stereo_pose
 from optrack.calibration.board import Checkerboard
 from optrack.calibration.intrinsics import calibrate_intrinsics, corners_from_images
 from optrack.calibration.network import (
@@ -39,21 +39,7 @@ def test_stereo_pose_from_the_network_solver_matches_opencv_stereo_calibrate(ste
     result = calibrator.solve()
     right_T_left = invert(result.world_T_camera["right"]) @ result.world_T_camera["left"]
 
-    pairs = [(a, b) for a, b in zip(left, right, strict=True) if a is not None and b is not None]
-    objects = [BOARD.object_points.astype(np.float32)] * len(pairs)
-    opencv = cv2.stereoCalibrate(
-        objects,
-        [a.reshape(-1, 1, 2).astype(np.float32) for a, _ in pairs],
-        [b.reshape(-1, 1, 2).astype(np.float32) for _, b in pairs],
-        k_left.K,
-        k_left.dist_coeffs,
-        k_right.K,
-        k_right.dist_coeffs,
-        size,
-        flags=cv2.CALIB_FIX_INTRINSIC,
-        criteria=(cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12),
-    )
-    reference = make_pose(opencv[5], opencv[6].ravel())
+    reference = opencv_stereo_pose(left, right, k_left, k_right, BOARD, size)
     baseline = np.linalg.norm(right_T_left[:3, 3])
     assert baseline == pytest.approx(np.linalg.norm(reference[:3, 3]), rel=0.005)
     assert rotation_angle_deg(right_T_left, reference) < 0.1
