@@ -5,6 +5,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.optrack-installed
+NORFAIR := 2.3.0
 XVFB   := xvfb-run -a -s "-screen 0 1280x1024x24"
 
 .PHONY: setup system-deps run test test-2d test-gl lint bench clean
@@ -14,10 +15,13 @@ setup: system-deps $(STAMP)
 system-deps:
 	@bash packaging/install-system-deps.sh
 
-$(STAMP): pyproject.toml
+# norfair, the tracking bench's peer: its metadata pins numpy < 2 (it runs on 2.x), so it
+# goes in without its pins; its dependencies (filterpy, rich, scipy) are in pyproject.
+$(STAMP): pyproject.toml Makefile
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e '.[dev]'
+	$(BIN)/python -m pip install -q --no-deps norfair==$(NORFAIR)
 	@touch $(STAMP)
 
 run: setup

@@ -6,6 +6,7 @@ tracker's own, kept for ``trail_seconds``.
 
 from __future__ import annotations
 
+import bisect
 from collections import deque
 
 import numpy as np
@@ -34,8 +35,13 @@ def track_color(track_id: int) -> tuple[int, int, int]:
     return _PALETTE[track_id % len(_PALETTE)]
 
 
+#: A batch stamped this much before the newest one means the site's time went back (a
+#: replay restarted); less is the usual order of frames from several sensors.
+RESTART_S = 1.0
+
+
 class TrailHistory:
-    """The last ``seconds`` of each track's (x, y), by track id."""
+    """The last ``seconds`` of each track's (x, y), by track id, in stamp order."""
 
     def __init__(self, seconds: float) -> None:
         self.seconds = seconds
@@ -43,12 +49,19 @@ class TrailHistory:
         self._last_stamp: float | None = None
 
     def update(self, batch: TrackBatch) -> None:
-        if self._last_stamp is not None and batch.stamp < self._last_stamp:
+        if self._last_stamp is not None and batch.stamp < self._last_stamp - RESTART_S:
             self._points.clear()  # time went back: a replay restarted
-        self._last_stamp = batch.stamp
+            self._last_stamp = None
+        newest = batch.stamp if self._last_stamp is None else max(self._last_stamp, batch.stamp)
+        self._last_stamp = newest
         for track in batch.tracks:
-            self._points.setdefault(track.id, deque()).append((batch.stamp, track.x, track.y))
-        oldest = batch.stamp - self.seconds
+            points = self._points.setdefault(track.id, deque())
+            point = (batch.stamp, track.x, track.y)
+            if points and batch.stamp < points[-1][0]:  # another sensor's earlier frame
+                points.insert(bisect.bisect(points, batch.stamp, key=lambda p: p[0]), point)
+            else:
+                points.append(point)
+        oldest = newest - self.seconds
         for track_id in list(self._points):
             points = self._points[track_id]
             while points and points[0][0] < oldest:

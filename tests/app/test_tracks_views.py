@@ -76,6 +76,11 @@ def test_trails_keep_the_last_seconds_and_forget_old_ids():
     assert trails.ids() == [1]  # id 2 was last seen more than a second ago
     path = trails.trail(1)
     assert path[0, 0] == 2.625 and path[-1, 0] == 3.625 and len(path) == 9
+    # Frames of several sensors reach the tracker slightly out of order: the trail keeps
+    # them all, in stamp order.
+    trails.update(batch(3.6, Track(1, 3.6, 0.0, 1.7)))
+    path = trails.trail(1)
+    assert len(path) == 10 and list(path[-3:, 0]) == [3.5, 3.6, 3.625]
     trails.update(batch(0.0, Track(1, 5.0, 5.0, 1.7)))  # time went back: a replay restarted
     np.testing.assert_allclose(trails.trail(1), [[5.0, 5.0]])
 

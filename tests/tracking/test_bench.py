@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
-
-import pytest
-
 from optrack.evaluation.synthetic import crowd_scene, render
 from optrack.tracking.bench import BenchStream, run_norfair, run_ours, speed_20x10
 
@@ -30,10 +26,6 @@ def test_our_tracker_is_scored_on_a_stream() -> None:
     assert score.frames == 241 and score.mota > 0.8 and ms > 0
 
 
-@pytest.mark.skipif(
-    importlib.util.find_spec("norfair") is None,
-    reason="norfair (optional, for the peer comparison) is not installed",
-)
 def test_norfair_is_scored_on_the_same_stream() -> None:
     stream = _stream()
     score, ms = run_norfair(stream, distance=0.7, memory_s=1.0, delay_s=0.0, min_confidence=-1.5)
