@@ -336,8 +336,20 @@ class Tracker:
         taken: np.ndarray,
         associated: set[int],
     ) -> list[int]:
-        """Second association: detections the gate left over against lost tracks' classifiers."""
-        free = np.flatnonzero(~taken)
+        """Second association: detections the gate left over against lost tracks' classifiers.
+        As in the motion step, a detection too weak to start a track revives none, unless the
+        detector's flags explain its weakness (``explained_weak_detections``): the detector's
+        weak false alarms (furniture) would otherwise take the colours of someone lost."""
+        p = self.p
+        usable = np.array(
+            [
+                d.confidence >= p.min_confidence_initialization
+                or _hidden(d, p.explained_weak_detections)
+                for d in detections
+            ],
+            dtype=bool,
+        )
+        free = np.flatnonzero(~taken & usable)
         candidates = self._missing_candidates(t, associated)
         if not free.size or not candidates:
             return []
@@ -398,15 +410,17 @@ class Tracker:
             self.appearance.learn(t, track.id, features[j], np.delete(features, j, axis=0))
 
     def _recover_identities(self, t: float) -> None:
-        """Give a lost identity back to a new track its classifier recognises (Munaro 5.4)."""
+        """Give a lost identity back to a new track its classifier recognises (Munaro 5.4),
+        once the new track is validated: a false alarm (furniture) that happens to wear a
+        lost person's colours must not become that person, shown at once. A track validated
+        within its first ``recovery_detections`` detections is tried at each of them, one
+        validated later (a weak run) once."""
         a = self.appearance_params
         for track in list(self.tracks):
-            if track.recovery_done or track not in self.tracks:
-                continue
-            if track.detections > a.recovery_detections:
-                track.recovery_done = True
+            if track.recovery_done or track not in self.tracks or not track.validated:
                 continue
             if not track.features:
+                track.recovery_done = track.detections >= a.recovery_detections
                 continue
             F = np.array(track.features)
             best: tuple[float, int | None, int] = (a.min_confidence, None, 0)
@@ -438,6 +452,8 @@ class Tracker:
             if best[1] is not None:
                 self._give_identity(track, best[1], from_deleted=bool(best[2]))
                 track.recovery_done = True
+            else:
+                track.recovery_done = track.detections >= a.recovery_detections
 
     def _give_identity(self, track: TrackState, old_id: int, from_deleted: bool) -> None:
         self.appearance.drop(track.id)
@@ -450,7 +466,6 @@ class Tracker:
             track.born = min(track.born, old.born)
             track.detections += old.detections
         track.id = old_id
-        track.validated = True
         if classifier is not None:
             self.appearance.adopt(old_id, classifier)
         self.recovered += 1
