@@ -397,6 +397,19 @@ def neighbouring_pairs(views: list[SensorView]) -> list[tuple[int, int]]:
     return [tuple(sorted((order[k], order[(k + 1) % len(order)]))) for k in range(len(order))]
 
 
+def _hold_places(venue: Venue, params: Params) -> tuple[np.ndarray, np.ndarray]:
+    """The floor grid the operator's placements are chosen from (Nx2: every
+    ``grid_step``, ``wall_clearance`` from the walls) and the board centres held over it
+    (Mx3: the grid at each of ``hold_heights``)."""
+    step, edge = float(params.grid_step), float(params.wall_clearance)
+    xs = np.arange(-venue.half[0] + edge, venue.half[0] - edge + 1e-9, step)
+    ys = np.arange(-venue.half[1] + edge, venue.half[1] - edge + 1e-9, step)
+    grid = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
+    heights = [float(h) for h in str(params.hold_heights).split(",") if h.strip()]
+    centers = np.concatenate([np.column_stack([grid, np.full(len(grid), h)]) for h in heights])
+    return grid, centers
+
+
 def plan_board_steps(
     views: list[SensorView],
     venue: Venue,
@@ -414,15 +427,10 @@ def plan_board_steps(
             views, spec.intrinsics_sensor, venue, static_scene, spec, params, body_radius
         )
     board = Checkerboard(spec, params)
-    step, edge = float(params.grid_step), float(params.wall_clearance)
-    xs = np.arange(-venue.half[0] + edge, venue.half[0] - edge + 1e-9, step)
-    ys = np.arange(-venue.half[1] + edge, venue.half[1] - edge + 1e-9, step)
-    grid = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
-    heights = np.array([float(h) for h in str(params.hold_heights).split(",") if h.strip()])
+    grid, centers = _hold_places(venue, params)
     steps: list[BoardStep] = []
 
     # Held upright, facing one sensor or between two.
-    centers = np.concatenate([np.column_stack([grid, np.full(len(grid), h)]) for h in heights])
     subsets: list[tuple[int, ...]] = [(i,) for i in range(len(views))] + neighbouring_pairs(views)
     for subset in subsets:
         chosen = [views[i] for i in subset]
@@ -528,28 +536,21 @@ def plan_intrinsics_steps(
     if not 0 <= index < len(views):
         raise ValueError(f"sensor {index} is not one of the {len(views)} sensors")
     view, board = views[index], Checkerboard(spec, params)
-    step, edge = float(params.grid_step), float(params.wall_clearance)
-    xs = np.arange(-venue.half[0] + edge, venue.half[0] - edge + 1e-9, step)
-    ys = np.arange(-venue.half[1] + edge, venue.half[1] - edge + 1e-9, step)
-    grid = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
-    heights = np.array([float(h) for h in str(params.hold_heights).split(",") if h.strip()])
-    base = np.concatenate([np.column_stack([grid, np.full(len(grid), h)]) for h in heights])
+    step = float(params.grid_step)
+    _, base = _hold_places(venue, params)
     to_camera = view.world_T_camera[:3, 3] - base
     heading = np.arctan2(to_camera[:, 1], to_camera[:, 0])
     elevation = np.arctan2(to_camera[:, 2], np.linalg.norm(to_camera[:, :2], axis=1))
     limit = math.radians(params.max_hold_tilt_deg)
-    centers, normals, turns = [], [], []
-    for k, (yaw, pitch) in enumerate(INTRINSICS_TURNS):
+    normals = []
+    for yaw, pitch in INTRINSICS_TURNS:
         h = heading + math.radians(yaw)
         e = np.clip(elevation + math.radians(pitch), -limit, limit)
-        centers.append(base)
         normals.append(np.column_stack([np.cos(e) * np.cos(h), np.cos(e) * np.sin(h), np.sin(e)]))
-        turns.append(np.full(len(base), k))
-    centers_a, normals_a, turn = (
-        np.concatenate(centers),
-        np.concatenate(normals),
-        np.concatenate(turns),
-    )
+    # every held centre once per turn, turn by turn
+    centers_a = np.tile(base, (len(INTRINSICS_TURNS), 1))
+    normals_a = np.concatenate(normals)
+    turn = np.repeat(np.arange(len(INTRINSICS_TURNS)), len(base))
     horizontal = normals_a[:, :2] / np.maximum(
         np.linalg.norm(normals_a[:, :2], axis=1, keepdims=True), 1e-9
     )
