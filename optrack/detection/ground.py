@@ -44,7 +44,6 @@ __all__ = [
     "automatic_ground",
     "check_ground",
     "combine_with_calibration",
-    "fit_plane",
     "ground_from_calibration",
     "ground_from_pixels",
     "ground_from_points",
@@ -59,8 +58,6 @@ __all__ = [
 CAMERA_DOWN = np.array([0.0, 1.0, 0.0])
 #: Nearer than this (metres) the camera counts as lying on the plane.
 MIN_CAMERA_HEIGHT = 1e-3
-#: Points whose middle spread is below this fraction of their largest lie on one line.
-LINE_SPREAD = 1e-12
 #: Floor points a per-frame refit uses at most (a least-squares plane through a few
 #: thousand points is as good as through all, and far cheaper).
 FIT_POINTS = 4000
@@ -251,25 +248,6 @@ def refine_ground(plane: Plane, points: np.ndarray, params: Params) -> tuple[Pla
     return plane, updated
 
 
-def fit_plane(points: np.ndarray) -> Plane | None:
-    """Total-least-squares plane through Nx3 finite points, None when they are fewer
-    than 3 or on one line: :meth:`Plane.fit`'s plane (the normal is the direction of
-    least spread), from the 3x3 scatter matrix's eigenvectors rather than an SVD of
-    the N points (Hartley and Zisserman A5.2; a tenth of the time on 4000 points)."""
-    if len(points) < 3:
-        return None
-    columns = [np.asarray(points[:, k], dtype=np.float64) for k in range(3)]
-    centroid = [float(c.mean()) for c in columns]
-    centred = [c - m for c, m in zip(columns, centroid, strict=True)]
-    scatter = np.array([[float(np.dot(a, b)) for b in centred] for a in centred])
-    spread, axes = np.linalg.eigh(scatter)  # ascending: the normal is the first axis
-    # On one line: the middle spread vanishes, to the scatter matrix's precision (the
-    # squared singular values': relative 1e-12 where the SVD resolves 1e-9).
-    if spread[1] <= LINE_SPREAD * max(spread[2], 1e-24):
-        return None
-    return Plane.from_point_normal(centroid, axes[:, 0])
-
-
 def update_min_points(params: Params) -> float:
     """Floor voxels needed to refit: 300 * 0.06 / voxel_size / sampling_factor^2 (OpenPTrack)."""
     reference_voxel = 0.06
@@ -457,10 +435,10 @@ class GroundEstimator:
         ``ground_update_min_points``)."""
         if self.params.lock_ground or count < max(update_min_points(self.params), 3):
             return
-        refit = fit_plane(floor)
-        if refit is None:
+        try:
+            refit = Plane.fit(floor).oriented_towards((0.0, 0.0, 0.0))
+        except ValueError:
             return
-        refit = refit.oriented_towards((0.0, 0.0, 0.0))
         if abs(refit.d) >= MIN_CAMERA_HEIGHT:
             self.plane = refit
 

@@ -15,7 +15,6 @@ from optrack.detection.ground import (
     automatic_ground,
     check_ground,
     combine_with_calibration,
-    fit_plane,
     ground_from_calibration,
     ground_from_pixels,
     ground_from_points,
@@ -170,13 +169,19 @@ def test_floor_is_refitted_each_frame_unless_locked():
 
 def test_the_per_frame_refit_is_the_total_least_squares_plane():
     camera, _ = floor_cloud(height=2.0, tilt_deg=25, noise=0.01)
-    fitted = fit_plane(camera.astype(np.float32))
-    reference = Plane.fit(camera)
+    camera = camera[np.all(np.isfinite(camera), axis=1)]
+    fitted = Plane.fit(camera.astype(np.float32))
+    # the reference: the SVD of the centred points (the least singular vector is the normal)
+    centroid = camera.mean(axis=0)
+    normal = np.linalg.svd(camera - centroid, full_matrices=False)[2][2]
+    reference = Plane.from_point_normal(centroid, normal)
     assert fitted.angle_deg(reference) < 1e-6 or fitted.angle_deg(reference) > 180 - 1e-6
     assert abs(fitted.distance(np.zeros(3))) == pytest.approx(abs(reference.d), abs=1e-6)
     line = np.outer(np.linspace(0.0, 1.0, 10), [1.0, 2.0, 3.0])
-    assert fit_plane(line) is None
-    assert fit_plane(camera[:2]) is None
+    with pytest.raises(ValueError, match="one line"):
+        Plane.fit(line)
+    with pytest.raises(ValueError, match="at least 3"):
+        Plane.fit(camera[:2])
 
 
 def test_estimator_waits_for_a_frame_with_enough_depth():
