@@ -55,12 +55,7 @@ class HogClassifier:
 
     def scores(self, windows: list[np.ndarray]) -> np.ndarray:
         """SVM scores of 64x128 uint8 windows (grey or 3-channel)."""
-        if not windows:
-            return np.empty(0)
-        descriptors = np.stack(
-            [self.hog.compute(np.ascontiguousarray(w)).ravel() for w in windows]
-        ).astype(np.float64)
-        return descriptors @ self.w + self.b
+        return np.array([self.score(w) for w in windows], dtype=np.float64)
 
 
 def level_window(

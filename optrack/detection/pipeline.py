@@ -64,19 +64,19 @@ __all__ = ["Judgement", "PeopleDetector"]
 CROP_ROWS = 64
 
 
-def _transform(a_T_b: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """``a_T_b`` applied to ...x3 points, element-wise (a BLAS product on a tall Nx3
-    array is many times slower, and slower still on a busy machine)."""
+def _transform_xyz(
+    a_T_b: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``a_T_b`` applied to points given as their x, y and z arrays, element-wise (a BLAS
+    product on a tall Nx3 array is many times slower, and slower still on a busy
+    machine); the result in the same form, in the dtype of ``a_T_b`` and the arrays."""
     r, t = a_T_b[:3, :3], a_T_b[:3, 3]
-    x, y, z = points[..., 0], points[..., 1], points[..., 2]
-    return np.stack(
-        [
-            x * r[0, 0] + y * r[0, 1] + z * r[0, 2] + t[0],
-            x * r[1, 0] + y * r[1, 1] + z * r[1, 2] + t[1],
-            x * r[2, 0] + y * r[2, 1] + z * r[2, 2] + t[2],
-        ],
-        axis=-1,
-    )
+    return tuple(x * r[k, 0] + y * r[k, 1] + z * r[k, 2] + t[k] for k in range(3))  # type: ignore[return-value]
+
+
+def _transform(a_T_b: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``a_T_b`` applied to ...x3 points (see :func:`_transform_xyz`)."""
+    return np.stack(_transform_xyz(a_T_b, points[..., 0], points[..., 1], points[..., 2]), axis=-1)
 
 
 @dataclasses.dataclass
@@ -237,10 +237,8 @@ class PeopleDetector:
         else:
             # Walls and cupboards (tall columns, most of the points) are found on the
             # points and left out before the voxel grid, not voxelised and then dropped.
-            r, t = g_T_c[:3, :3].astype(np.float32), g_T_c[:3, 3].astype(np.float32)
-            x, y, z = points[:, 0], points[:, 1], points[:, 2]
             columns = TallColumns(
-                *(x * r[k, 0] + y * r[k, 1] + z * r[k, 2] + t[k] for k in range(3)),
+                *_transform_xyz(g_T_c.astype(np.float32), points[:, 0], points[:, 1], points[:, 2]),
                 voxel,
                 float(p.max_height),
                 float(p.cluster_tolerance) * voxel,
@@ -333,9 +331,7 @@ class PeopleDetector:
             floor, below its head."""
             if u1 > u0 and v1 > v0:
                 crop_c = cloud.components(slice(v0, v1, stride), slice(u0, u1, stride))
-                x, y, z = crop_c
-                r, t = g_T_c[:3, :3], g_T_c[:3, 3]  # as _transform, without stacking
-                crop_g = tuple(x * r[k, 0] + y * r[k, 1] + z * r[k, 2] + t[k] for k in range(3))
+                crop_g = _transform_xyz(g_T_c, *crop_c)
             else:
                 crop_c = crop_g = tuple(np.full((0, 0), np.nan) for _ in range(3))
             gx, gy, gz = crop_g

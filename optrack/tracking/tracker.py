@@ -337,9 +337,10 @@ class Tracker:
         associated: set[int],
     ) -> list[int]:
         """Second association: detections the gate left over against lost tracks' classifiers.
-        As in the motion step, a detection too weak to start a track revives none, unless the
-        detector's flags explain its weakness (``explained_weak_detections``): the detector's
-        weak false alarms (furniture) would otherwise take the colours of someone lost."""
+        A detection too weak to start a track revives none here (the motion step's rule)
+        unless the detector's flags explain its weakness (``explained_weak_detections``; the
+        motion step has no such exception): the detector's weak false alarms (furniture)
+        would otherwise take the colours of someone lost."""
         p = self.p
         usable = np.array(
             [
