@@ -83,6 +83,7 @@ class OutputsPanel(QWidget):
         layout.addLayout(row)
         layout.addWidget(self.message)
         self.destinations: list[dict[str, Any]] = []
+        self._by_node: dict[str, list[dict[str, Any]]] = {}
         self.kind.currentIndexChanged.connect(self._kind_changed)
         self.add_button.clicked.connect(self.request_add)
         self.address.returnPressed.connect(self.request_add)
@@ -165,5 +166,10 @@ class OutputsPanel(QWidget):
             self._filling = False
 
     def set_status(self, node: str, values: dict) -> None:
-        if "destinations" in values:
-            self.set_destinations(values["destinations"])
+        """Only an outputs node's status says what the outputs are: every status message
+        carries a ``destinations`` list, empty for detectors and trackers, which must not
+        wipe the table. Several outputs nodes (one per computer) are listed together."""
+        if values.get("role") != "outputs":
+            return
+        self._by_node[node] = list(values.get("destinations", []))
+        self.set_destinations([d for name in sorted(self._by_node) for d in self._by_node[name]])

@@ -15,6 +15,7 @@ def test_outputs_table_shows_what_the_site_reports(qtbot):
     panel.set_status(
         "outputs",
         {
+            "role": "outputs",
             "destinations": [
                 {
                     "kind": "udp",
@@ -32,6 +33,24 @@ def test_outputs_table_shows_what_the_site_reports(qtbot):
     assert rows == [["UDP JSON", "127.0.0.1:21234", "30.0"], ["WebSocket", "0.0.0.0:8765", ""]]
     assert panel.table.item(0, 0).checkState() == Qt.CheckState.Checked
     assert panel.table.item(1, 0).checkState() == Qt.CheckState.Unchecked
+
+
+def test_other_nodes_statuses_leave_the_outputs_list_alone(qtbot):
+    """Every status message carries a destinations list (empty but for outputs nodes):
+    a tracker's or detector's status right after the outputs' must not empty the table."""
+    panel = OutputsPanel()
+    qtbot.addWidget(panel)
+    udp = {"kind": "udp", "address": "127.0.0.1:21234", "enabled": True}
+    osc = {"kind": "osc", "address": "127.0.0.1:21235", "enabled": True}
+    panel.set_status("outputs", {"role": "outputs", "destinations": [udp]})
+    panel.set_status("tracker", {"role": "tracker", "destinations": []})
+    panel.set_status("kinect2_0", {"role": "detector", "destinations": []})
+    assert [d["address"] for d in panel.destinations] == ["127.0.0.1:21234"]
+    assert panel.table.rowCount() == 1
+    panel.set_status("outputs-lab", {"role": "outputs", "destinations": [osc]})
+    assert [d["kind"] for d in panel.destinations] == ["udp", "osc"]
+    panel.set_status("outputs", {"role": "outputs", "destinations": []})
+    assert [d["kind"] for d in panel.destinations] == ["osc"]
 
 
 def test_outputs_send_add_remove_and_enable_requests(qtbot):
