@@ -8,10 +8,20 @@
   synthetic scenes with known answers and, when the simulator is built, the
   detector's output on short simulated recordings of the ``crowd``,
   ``distance`` and ``occlusions`` scenarios (made once and cached, see
-  :func:`bench_cache`). norfair is tuned generously: a grid of its distance
-  threshold, hit counter and initialisation delay is searched on the very
-  stream it is scored on, and its best result is reported; our tracker runs
-  at its defaults.
+  :func:`bench_cache`). Our tracker runs at its defaults, one configuration for
+  every stream. norfair is run over a grid of its distance threshold, hit
+  counter, initialisation delay and detection threshold on every stream, and
+  reported twice:
+
+  * ``norfair`` (the oracle): its best grid point on each stream, chosen on the
+    very stream it is scored on (a setting per stream, which no operator could
+    pick in advance: the most generous comparison);
+  * ``norfair_single``: the one grid point with the best mean MOTA over all the
+    bench's streams (then the fewest switches), the same for every stream: the
+    discipline our single default configuration has.
+
+  ``better_than_norfair`` compares with the oracle, ``better_than_norfair_single``
+  with the single setting.
 """
 
 from __future__ import annotations
@@ -148,26 +158,64 @@ def run_norfair(
     return _score(stream, outputs), statistics.median(update_ms)
 
 
-def _tune_norfair(
-    stream: BenchStream, min_confidence: float
-) -> tuple[dict[str, float], MotScore, float]:
-    """norfair's best setting on this stream (higher MOTA, then fewer switches)."""
-    best: tuple[tuple[float, int], dict[str, float], MotScore, float] | None = None
-    for distance, memory, delay, threshold in itertools.product(
-        NORFAIR_DISTANCES, NORFAIR_MEMORY_S, NORFAIR_DELAY_S, (NO_THRESHOLD, min_confidence)
-    ):
-        setting = {
-            "distance": distance,
-            "memory_s": memory,
-            "delay_s": delay,
-            "min_confidence": threshold,
-        }
-        score, ms = run_norfair(stream, **setting)
-        key = (score.mota, -score.idsw)
-        if best is None or key > best[0]:
-            best = (key, setting, score, ms)
-    assert best is not None
-    return best[1], best[2], best[3]
+def _norfair_grid(min_confidence: float) -> list[dict[str, float]]:
+    """Every norfair setting the bench tries."""
+    return [
+        {"distance": distance, "memory_s": memory, "delay_s": delay, "min_confidence": threshold}
+        for distance, memory, delay, threshold in itertools.product(
+            NORFAIR_DISTANCES, NORFAIR_MEMORY_S, NORFAIR_DELAY_S, (NO_THRESHOLD, min_confidence)
+        )
+    ]
+
+
+def _norfair_key(score: MotScore) -> tuple[float, int]:
+    return (score.mota, -score.idsw)
+
+
+def _norfair_runs(
+    stream: BenchStream, grid: Sequence[dict[str, float]]
+) -> list[tuple[MotScore, float]]:
+    """norfair at every setting of the grid on one stream: (score, median ms) each."""
+    return [run_norfair(stream, **setting) for setting in grid]
+
+
+def _oracle_setting(runs: Sequence[tuple[MotScore, float]]) -> int:
+    """Index of the best run on one stream (higher MOTA, then fewer switches; the first
+    such in the grid's order)."""
+    best = 0
+    for k, (score, _) in enumerate(runs):
+        if _norfair_key(score) > _norfair_key(runs[best][0]):
+            best = k
+    return best
+
+
+def single_setting(runs: Sequence[Sequence[tuple[MotScore, float]]]) -> int:
+    """Index of the one grid point best over all streams: the highest mean MOTA, then the
+    fewest switches in all (``runs[stream][setting]``)."""
+    settings = len(runs[0])
+    keys = [
+        (
+            float(np.mean([stream[k][0].mota for stream in runs])),
+            -sum(stream[k][0].idsw for stream in runs),
+        )
+        for k in range(settings)
+    ]
+    return max(range(settings), key=lambda k: (keys[k], -k))
+
+
+def _norfair_entry(score: MotScore, ms: float, setting: dict[str, float]) -> dict[str, Any]:
+    return {
+        "mota": round(score.mota, 4),
+        "idsw": score.idsw,
+        "fp": score.fp,
+        "fn": score.fn,
+        "ms_per_update": round(ms, 4),
+        "settings": setting,
+    }
+
+
+def _better(ours: MotScore, theirs: MotScore) -> bool:
+    return ours.mota > theirs.mota and ours.idsw < theirs.idsw
 
 
 def bench_cache() -> Path:
@@ -298,9 +346,16 @@ def speed_20x10(seconds: float = 20.0, seed: int = 0) -> dict[str, float]:
 def _compare(
     streams: Sequence[BenchStream], min_confidence: float, norfair_ok: bool
 ) -> dict[str, Any]:
+    """Per stream: ours, norfair's oracle setting (``norfair``) and its single setting
+    (``norfair_single``); the single setting itself and its mean MOTA come under the key
+    ``_single``, which :func:`cmd_bench_tracking` takes out."""
     out: dict[str, Any] = {}
+    ours_scores: dict[str, MotScore] = {}
+    grid = _norfair_grid(min_confidence)
+    all_runs: list[list[tuple[MotScore, float]]] = []
     for stream in streams:
         ours, ours_ms = run_ours(stream)
+        ours_scores[stream.name] = ours
         entry: dict[str, Any] = {
             "source": stream.source,
             "sensors": stream.sensors,
@@ -317,19 +372,30 @@ def _compare(
         }
         line = f"bench tracking: {stream.name}: ours MOTA {ours.mota:.3f}, {ours.idsw} switches"
         if norfair_ok:
-            setting, theirs, theirs_ms = _tune_norfair(stream, min_confidence)
-            entry["norfair"] = {
-                "mota": round(theirs.mota, 4),
-                "idsw": theirs.idsw,
-                "fp": theirs.fp,
-                "fn": theirs.fn,
-                "ms_per_update": round(theirs_ms, 4),
-                "settings": setting,
-            }
-            entry["better_than_norfair"] = ours.mota > theirs.mota and ours.idsw < theirs.idsw
-            line += f"; norfair MOTA {theirs.mota:.3f}, {theirs.idsw} switches"
+            runs = _norfair_runs(stream, grid)
+            all_runs.append(runs)
+            k = _oracle_setting(runs)
+            theirs, theirs_ms = runs[k]
+            entry["norfair"] = _norfair_entry(theirs, theirs_ms, grid[k])
+            entry["better_than_norfair"] = _better(ours, theirs)
+            line += f"; norfair (oracle) MOTA {theirs.mota:.3f}, {theirs.idsw} switches"
         out[stream.name] = entry
         _info(line)
+    if norfair_ok and streams:
+        k = single_setting(all_runs)
+        for stream, runs in zip(streams, all_runs, strict=True):
+            entry = out[stream.name]
+            theirs, theirs_ms = runs[k]
+            entry["norfair_single"] = _norfair_entry(theirs, theirs_ms, grid[k])
+            entry["better_than_norfair_single"] = _better(ours_scores[stream.name], theirs)
+            _info(
+                f"bench tracking: {stream.name}: norfair (single setting) MOTA "
+                f"{theirs.mota:.3f}, {theirs.idsw} switches"
+            )
+        out["_single"] = {
+            "settings": grid[k],
+            "mean_mota": round(float(np.mean([runs[k][0].mota for runs in all_runs])), 4),
+        }
     return out
 
 
@@ -352,11 +418,24 @@ def cmd_bench_tracking(args: argparse.Namespace) -> int:
         stream = _sim_stream(scenario, sensors, seconds, seed=1)
         if stream is not None:
             streams.append(stream)
-    result["scenarios"] = _compare(streams, min_confidence, norfair_ok)
+    scenarios = _compare(streams, min_confidence, norfair_ok)
+    single = scenarios.pop("_single", None)
+    result["scenarios"] = scenarios
     if norfair_ok:
+        result["norfair_protocols"] = {
+            "norfair": "oracle: the best grid setting of each scene, chosen on that scene",
+            "norfair_single": "one grid setting for every scene: the best mean MOTA over all "
+            "scenes (as our tracker, which runs its defaults everywhere)",
+        }
         result["better_than_norfair_everywhere"] = all(
-            e["better_than_norfair"] for e in result["scenarios"].values()
+            e["better_than_norfair"] for e in scenarios.values()
         )
+        result["better_than_norfair_single_everywhere"] = all(
+            e["better_than_norfair_single"] for e in scenarios.values()
+        )
+        if single is not None:
+            result["norfair_single_setting"] = single["settings"]
+            result["norfair_single_mean_mota"] = single["mean_mota"]
     if getattr(args, "json", False):
         from optrack.cli import emit_json
 

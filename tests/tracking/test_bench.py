@@ -2,8 +2,17 @@
 
 from __future__ import annotations
 
+from optrack.evaluation.clear_mot import MotScore
 from optrack.evaluation.synthetic import crowd_scene, render
-from optrack.tracking.bench import BenchStream, run_norfair, run_ours, speed_20x10
+from optrack.tracking.bench import (
+    BenchStream,
+    _compare,
+    _oracle_setting,
+    run_norfair,
+    run_ours,
+    single_setting,
+    speed_20x10,
+)
 
 
 def _stream(seconds: float = 8.0) -> BenchStream:
@@ -31,3 +40,45 @@ def test_norfair_is_scored_on_the_same_stream() -> None:
     score, ms = run_norfair(stream, distance=0.7, memory_s=1.0, delay_s=0.0, min_confidence=-1.5)
     assert score.frames == 241 and score.objects == run_ours(stream)[0].objects
     assert score.matches > 0 and ms > 0
+
+
+def _score(mota: float, idsw: int) -> MotScore:
+    return MotScore(mota, 0.05, 0, 0, idsw, 1.0, 1.0, 10, 10, 10)
+
+
+def test_the_oracle_is_the_best_setting_of_each_stream() -> None:
+    runs = [(_score(0.9, 3), 1.0), (_score(0.95, 5), 1.0), (_score(0.95, 2), 1.0)]
+    assert _oracle_setting(runs) == 2
+
+
+def test_the_single_setting_is_the_best_mean_mota_over_all_streams() -> None:
+    # setting 0 wins stream a, setting 1 wins stream b, setting 2 wins neither but is
+    # the best on average: one setting for every stream picks 2
+    a = [(_score(0.99, 0), 1.0), (_score(0.50, 0), 1.0), (_score(0.95, 0), 1.0)]
+    b = [(_score(0.40, 0), 1.0), (_score(0.98, 0), 1.0), (_score(0.90, 0), 1.0)]
+    assert [_oracle_setting(a), _oracle_setting(b)] == [0, 1]
+    assert single_setting([a, b]) == 2
+    # equal means: fewer switches in all
+    c = [(_score(0.9, 4), 1.0), (_score(0.9, 1), 1.0)]
+    assert single_setting([c, c]) == 1
+
+
+def test_norfair_is_reported_with_its_oracle_and_its_single_setting() -> None:
+    streams = [_stream(3.0), _stream(3.0)]
+    streams[1].name = "tiny-2"
+    out = _compare(streams, min_confidence=-1.5, norfair_ok=True)
+    single = out.pop("_single")
+    assert set(single["settings"]) == {"distance", "memory_s", "delay_s", "min_confidence"}
+    for entry in out.values():
+        oracle, one = entry["norfair"], entry["norfair_single"]
+        assert one["settings"] == single["settings"]
+        # the oracle is chosen on the stream itself: never worse than the single setting
+        assert oracle["mota"] >= one["mota"]
+        assert {"mota", "idsw", "ms_per_update"} <= set(oracle) & set(one)
+        ours = entry["ours"]
+        assert entry["better_than_norfair"] == (
+            ours["mota"] > oracle["mota"] and ours["idsw"] < oracle["idsw"]
+        )
+        assert entry["better_than_norfair_single"] == (
+            ours["mota"] > one["mota"] and ours["idsw"] < one["idsw"]
+        )
