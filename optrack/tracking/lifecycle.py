@@ -69,6 +69,9 @@ class TrackState:
     #: appearance features of the first unoccluded detections (identity recovery)
     features: list[np.ndarray] = dataclasses.field(default_factory=list)
     recovery_done: bool = False
+    #: whether the detector flagged the track's latest detection ``out_of_view`` (the
+    #: person was cut by the image's edge)
+    last_out_of_view: bool = False
 
     def position_at(self, t: float) -> tuple[float, float]:
         """Constant-velocity extrapolation of the filtered position to time t."""
@@ -84,13 +87,19 @@ def on_detected(
     sensor: str,
     params: Any,
     hidden: bool = False,
+    out_of_view: bool = False,
 ) -> None:
     """A detection (stamped t, possibly late) was associated to the track.
 
     ``hidden``: the detector flagged the detection partly hidden in a way that
     explains a weak confidence (``out_of_view``: partly outside the image; see
     ``explained_weak_detections``): in a run it weighs as a confident detection.
+    ``out_of_view``: the detector flagged it partly outside the image (when it is the
+    track's latest detection, the track goes MISSING only after
+    ``sec_before_missing_out_of_view``).
     """
+    if t >= track.last_detection:
+        track.last_out_of_view = out_of_view
     track.detections += 1
     confident = confidence >= params.min_confidence_initialization
     if confident:
@@ -151,6 +160,13 @@ def advance(track: TrackState, now: float, params: Any) -> Fate:
     A track found again after it went missing is seen (and kept alive) only
     once ``detections_to_validate`` detections in a row confirm it: one stray
     detection (a false alarm in its wide gate) does not keep a lost track.
+
+    A validated track whose latest detection the detector flagged ``out_of_view``
+    (the person cut by the image's edge) goes MISSING after
+    ``sec_before_missing_out_of_view`` rather than ``sec_before_missing``: the detector
+    gives up on a person at the image's edge while much of them is still in the image.
+    Only the status changes (what the output smoother holds); association and
+    deletion go by the time unseen as for any track.
     """
     unseen = now - track.last_detection
     if not track.validated and (
@@ -159,7 +175,10 @@ def advance(track: TrackState, now: float, params: Any) -> Fate:
         return Fate.FAKE
     if now - track.confirmed >= params.sec_before_old:
         return Fate.OLD
-    if unseen >= params.sec_before_missing or track.confirmed < track.last_detection:
+    missing_after = params.sec_before_missing
+    if track.last_out_of_view:
+        missing_after = max(missing_after, params.sec_before_missing_out_of_view)
+    if unseen >= missing_after or track.confirmed < track.last_detection:
         track.status = TrackStatus.MISSING
     return Fate.KEEP
 

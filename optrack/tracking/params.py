@@ -220,6 +220,18 @@ TRACKING_PARAMS = register(
                 help="A track no sensor has detected for this long is MISSING.",
             ),
             Param(
+                "sec_before_missing_out_of_view",
+                0.6,
+                min=0.0,
+                max=10.0,
+                step=0.05,
+                unit="s",
+                help="A validated track whose latest detection the detector flagged out_of_view "
+                "(cut by the image's edge) is MISSING only after this long unseen (never sooner "
+                "than sec_before_missing): the detector gives up on a person at the image's edge "
+                "while much of them is still in it, so the output holds them longer.",
+            ),
+            Param(
                 "sec_before_old",
                 8.0,
                 min=0.1,

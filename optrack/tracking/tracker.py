@@ -306,6 +306,7 @@ class Tracker:
             sensor,
             self.p,
             _hidden(detection, self.p.explained_weak_detections),
+            detection.out_of_view,
         )
 
     # -------------------------------------------------------------- appearance
@@ -515,7 +516,14 @@ class Tracker:
             self.next_id += 1
             record_position(track, t, p.max_detection_delay + 2 * p.velocity_baseline)
             on_detected(
-                track, t, d.confidence, d.height, sensor, p, _hidden(d, p.explained_weak_detections)
+                track,
+                t,
+                d.confidence,
+                d.height,
+                sensor,
+                p,
+                _hidden(d, p.explained_weak_detections),
+                d.out_of_view,
             )
             if features is not None and np.all(np.isfinite(features[j])):
                 track.features.append(features[j])

@@ -236,3 +236,41 @@ def test_a_weak_second_detection_beside_a_tracked_person_starts_no_track() -> No
         tracker.update(DetectionBatch(sensor_id="a", stamp=k / RATE, detections=people))
     assert [t.id for t in tracker.output().tracks] == [1]
     assert len(tracker.tracks) == 1
+
+
+def _status_after(tracker: Tracker, last: float, unseen: float) -> TrackStatus:
+    _run(tracker, last + 1 / RATE, last + unseen)  # nobody
+    return tracker.tracks[0].status
+
+
+@pytest.mark.parametrize("flagged", [False, True])
+def test_a_track_lost_at_the_images_edge_goes_missing_after_sec_before_missing_out_of_view(
+    flagged: bool,
+) -> None:
+    """The detector gives up on a person cut by the image's edge while much of them is
+    still in the image: such a track stays unmissing (held in the output) for longer."""
+    tracker = Tracker()
+    _run(tracker, 0.0, 1.0, 1.0)
+    tracker.update(_batch(1.0, 1.0, out_of_view=flagged))  # the latest detection
+    p = tracker.params
+    assert (p.sec_before_missing, p.sec_before_missing_out_of_view) == (0.2, 0.6)
+    assert _status_after(tracker, 1.0, 0.3) is (TrackStatus.NEW if flagged else TrackStatus.MISSING)
+    assert _status_after(tracker, 1.3, 0.35) is TrackStatus.MISSING
+    # association and deletion are those of any track: it is deleted sec_before_old after
+    _run(tracker, 1.7, 9.1)
+    assert tracker.tracks == []
+
+
+def test_only_the_latest_detection_counts_for_the_out_of_view_hold() -> None:
+    tracker = Tracker()
+    _run(tracker, 0.0, 0.5, 1.0, out_of_view=True)
+    _run(tracker, 0.5, 1.0, 1.0)  # back in full view, then lost
+    assert not tracker.tracks[0].last_out_of_view
+    assert _status_after(tracker, 1.0 - 1 / RATE, 0.3) is TrackStatus.MISSING
+
+
+def test_an_unvalidated_track_lost_at_the_images_edge_still_dies_at_once() -> None:
+    tracker = Tracker()
+    tracker.update(_batch(0.0, 1.0, out_of_view=True))
+    _run(tracker, 0.1, 0.25)  # empty batches
+    assert tracker.tracks == []

@@ -6,8 +6,15 @@ import json
 
 import pytest
 
-from optrack.tracking import SMOOTHING_PARAMS, OutputSmoother, heartbeat_message, tracks_message
-from optrack.types import Track, TrackBatch, TrackStatus
+from optrack.evaluation.replay import replay
+from optrack.tracking import (
+    SMOOTHING_PARAMS,
+    OutputSmoother,
+    Tracker,
+    heartbeat_message,
+    tracks_message,
+)
+from optrack.types import Detection, DetectionBatch, Track, TrackBatch, TrackStatus
 
 
 def _batch(
@@ -81,3 +88,35 @@ def test_the_window_follows_a_live_parameter_change() -> None:
     smoother.params.window = 2
     smoother.add(_batch(0.05, (1, 5.0)))
     assert smoother.publish(0.06).tracks[0].x == pytest.approx(4.5)
+
+
+def test_a_person_lost_at_the_images_edge_is_held_longer_in_the_output() -> None:
+    """Tracker and smoother together: a person whose last detections were flagged
+    out_of_view is shown sec_before_missing_out_of_view + drop_after after them (1.2 s),
+    one lost in full view sec_before_missing + drop_after (0.8 s)."""
+
+    def shown_until(flagged: bool) -> float:
+        batches = []
+        for k in range(91):  # 3 s at 30 Hz: walking for 1 s, then nobody
+            t = k / 30
+            people = (
+                [
+                    Detection(
+                        x=1.0 + 0.5 * t,
+                        y=0.0,
+                        z=0.9,
+                        height=1.7,
+                        confidence=1.0,
+                        out_of_view=flagged and t > 0.8,
+                    )
+                ]
+                if t <= 1.0
+                else []
+            )
+            batches.append(DetectionBatch(sensor_id="a", stamp=t, detections=people))
+        times = [k / 100 for k in range(300)]
+        result = replay(batches, times, Tracker())
+        return max(t for t, out in zip(times, result.outputs, strict=True) if out.tracks)
+
+    assert shown_until(False) == pytest.approx(1.0 + 0.8, abs=0.05)
+    assert shown_until(True) == pytest.approx(1.0 + 1.2, abs=0.05)
