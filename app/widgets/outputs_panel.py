@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from PySide6.QtCore import Qt, Signal
+from PySide6.QtGui import QColor
 from PySide6.QtWidgets import (
     QComboBox,
     QHBoxLayout,
@@ -28,7 +29,7 @@ from optrack.outputs.udp import parse_address
 
 KIND_TITLES = {"udp": "UDP JSON", "osc": "OSC", "websocket": "WebSocket"}
 DEFAULT_ADDRESSES = {kind: f"127.0.0.1:{port}" for kind, port in OUTPUT_PORTS.items()}
-COLUMNS = ("on", "kind", "address", "packets/s")
+COLUMNS = ("on", "kind", "address", "packets/s", "problem")
 
 
 def check_address(kind: str, address: str) -> str | None:
@@ -59,7 +60,7 @@ class OutputsPanel(QWidget):
         self.table.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
         header = self.table.horizontalHeader()
         header.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
-        header.setSectionResizeMode(2, QHeaderView.ResizeMode.Stretch)
+        header.setSectionResizeMode(len(COLUMNS) - 1, QHeaderView.ResizeMode.Stretch)
         self.kind = QComboBox()
         for kind in OUTPUT_KINDS:
             self.kind.addItem(KIND_TITLES[kind], kind)
@@ -156,10 +157,12 @@ class OutputsPanel(QWidget):
                     QTableWidgetItem(KIND_TITLES.get(destination["kind"], destination["kind"])),
                     QTableWidgetItem(destination["address"]),
                     QTableWidgetItem("" if rate is None else f"{rate:.1f}"),
+                    QTableWidgetItem(destination.get("error") or ""),
                 ]
-                if destination.get("error"):
+                if destination.get("error"):  # the sentence, whole, on every cell of the row
                     for cell in cells:
                         cell.setToolTip(destination["error"])
+                    cells[-1].setForeground(QColor(190, 40, 40))
                 for column, cell in enumerate(cells):
                     self.table.setItem(row, column, cell)
         finally:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pyqtgraph.opengl as gl
-from PySide6.QtGui import QColor, QFont, QMatrix4x4
+from PySide6.QtGui import QColor, QFont, QMatrix4x4, QVector3D, QVector4D
 from PySide6.QtWidgets import QSizePolicy
 
 from app.trails import TrailHistory, track_color
@@ -15,6 +15,10 @@ from optrack.types import NetworkCalibration, TrackBatch
 FRUSTUM_COLOR = (0.45, 0.75, 1.0, 1.0)
 # Frustum vertices: 0 is the optical centre, 1-4 the image corners at depth.
 FRUSTUM_EDGES = np.array([0, 1, 0, 2, 0, 3, 0, 4, 1, 2, 2, 3, 3, 4, 4, 1])
+# Where a camera may stand in the view's normalised coordinates (-1..1) once framed: its
+# name is written to the right of it, so less room on that side.
+FRAME_X = (-0.9, 0.6)
+FRAME_Y = (-0.85, 0.85)
 
 
 def _rgba(rgb: tuple[int, int, int], alpha: float = 1.0) -> tuple[float, float, float, float]:
@@ -36,7 +40,12 @@ class WorldView(gl.GLViewWidget):
         self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
         self.setMinimumSize(320, 240)
         self.setBackgroundColor((25, 28, 34))
+        self.floor_size_m = floor_size_m
         self.setCameraPosition(distance=floor_size_m * 1.2, elevation=30, azimuth=-60)
+        # Until the operator turns or zooms the view, it keeps every camera (and its name)
+        # in sight: framed again when the cameras change and when the view is resized.
+        self.user_moved = False
+        self._camera_positions = np.zeros((0, 3))
         self.floor = gl.GLGridItem()
         self.floor.setSize(floor_size_m, floor_size_m)
         self.floor.setSpacing(1.0, 1.0)
@@ -80,6 +89,54 @@ class WorldView(gl.GLViewWidget):
             self.addItem(lines)
             self.addItem(label)
             self.cameras[sensor_id] = (lines, label)
+        self._camera_positions = np.array(
+            [sensor.pose[:3, 3] for sensor in calibration.sensors.values()]
+        ).reshape(-1, 3)
+        self.frame_cameras()
+
+    # ---------------------------------------------------------------- framing
+    def _in_view(self, points: np.ndarray) -> bool:
+        width, height = max(self.width(), 1), max(self.height(), 1)
+        viewport = (0, 0, width, height)
+        transform = self.projectionMatrix(viewport, viewport) * self.viewMatrix()
+        for x, y, z in points:
+            mapped = transform.map(QVector4D(float(x), float(y), float(z), 1.0))
+            if mapped.w() <= 0:
+                return False
+            u, v = mapped.x() / mapped.w(), mapped.y() / mapped.w()
+            if not (FRAME_X[0] < u < FRAME_X[1] and FRAME_Y[0] < v < FRAME_Y[1]):
+                return False
+        return True
+
+    def frame_cameras(self) -> None:
+        """Look at the middle of the cameras and the world's origin, from the floor view's
+        usual distance or farther, until every camera stands inside the view with room
+        for its name (nothing happens once the operator has moved the view)."""
+        if self.user_moved or len(self._camera_positions) == 0:
+            return
+        points = np.vstack([self._camera_positions, np.zeros((1, 3))])
+        low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
+        middle = (low + high) / 2.0
+        self.opts["center"] = QVector3D(float(middle[0]), float(middle[1]), 0.0)
+        distance = self.floor_size_m * 1.2
+        for _ in range(30):
+            self.opts["distance"] = distance
+            if self._in_view(self._camera_positions):
+                break
+            distance *= 1.1
+        self.update()
+
+    def resizeEvent(self, event) -> None:  # noqa: N802 (Qt's name)
+        super().resizeEvent(event)
+        self.frame_cameras()
+
+    def mousePressEvent(self, event) -> None:  # noqa: N802
+        self.user_moved = True
+        super().mousePressEvent(event)
+
+    def wheelEvent(self, event) -> None:  # noqa: N802
+        self.user_moved = True
+        super().wheelEvent(event)
 
     def set_cloud(self, sensor_id: str, points: np.ndarray, colors: np.ndarray | None) -> None:
         """Show a sensor's (already decimated) cloud: Nx3 world points, Nx3 RGB uint8 or None."""

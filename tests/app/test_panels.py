@@ -23,14 +23,23 @@ def test_outputs_table_shows_what_the_site_reports(qtbot):
                     "enabled": True,
                     "packets_per_s": 30.04,
                 },
-                {"kind": "websocket", "address": "0.0.0.0:8765", "enabled": False},
-            ]
+                {
+                    "kind": "websocket",
+                    "address": "0.0.0.0:8765",
+                    "enabled": False,
+                    "error": "address 0.0.0.0:8765 is in use",
+                },
+            ],
         },
     )
     rows = [
-        [panel.table.item(r, c).text() for c in range(1, 4)] for r in range(panel.table.rowCount())
+        [panel.table.item(r, c).text() for c in range(1, 5)] for r in range(panel.table.rowCount())
     ]
-    assert rows == [["UDP JSON", "127.0.0.1:21234", "30.0"], ["WebSocket", "0.0.0.0:8765", ""]]
+    assert rows == [
+        ["UDP JSON", "127.0.0.1:21234", "30.0", ""],
+        ["WebSocket", "0.0.0.0:8765", "", "address 0.0.0.0:8765 is in use"],
+    ]
+    assert panel.table.item(1, 2).toolTip() == "address 0.0.0.0:8765 is in use"
     assert panel.table.item(0, 0).checkState() == Qt.CheckState.Checked
     assert panel.table.item(1, 0).checkState() == Qt.CheckState.Unchecked
 

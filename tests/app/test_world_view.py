@@ -100,3 +100,42 @@ def test_point_clouds_are_drawn_per_sensor(qtbot):
     assert near(after, (255, 0, 255)).sum() > near(before, (255, 0, 255)).sum() + 500
     view.set_cloud("ceiling", points[:10], None)  # replaced, not added
     assert len(view.clouds) == 1 and len(view.clouds["ceiling"].pos) == 10
+
+
+def _ndc(view: WorldView, point) -> tuple[float, float]:
+    """Where ``point`` lands in the view (normalised coordinates, -1..1)."""
+    from PySide6.QtGui import QVector4D
+
+    viewport = (0, 0, view.width(), view.height())
+    mapped = (view.projectionMatrix(viewport, viewport) * view.viewMatrix()).map(
+        QVector4D(*map(float, point), 1.0)
+    )
+    return mapped.x() / mapped.w(), mapped.y() / mapped.w()
+
+
+def test_cameras_far_apart_are_framed_with_room_for_their_names(qtbot):
+    view = shown(qtbot, floor_size_m=10.0)
+    view.resize(420, 600)  # a tall, narrow dock, as in the main window
+    qtbot.wait(50)
+    places = {"east": (7.0, 4.0, 2.5), "west": (-6.5, 1.0, 2.5), "south": (0.5, -6.0, 2.5)}
+    default = view.opts["distance"]
+    outside = [name for name, p in places.items() if not -1 < _ndc(view, p)[0] < 1]
+    calibration = NetworkCalibration(
+        sensors={
+            name: SensorCalibration(
+                world_T_camera=matrix(make_pose(translation=place)), intrinsics=KINECT
+            )
+            for name, place in places.items()
+        }
+    )
+    view.set_calibration(calibration, frustum_depth=1.0)
+    assert view.opts["distance"] > default
+    for name, place in places.items():
+        u, v = _ndc(view, place)
+        assert -0.9 < u < 0.6 and -0.85 < v < 0.85, f"{name} lands at ({u:.2f}, {v:.2f})"
+    assert outside == ["east"]  # the plain view would cut it off
+    # Once the operator zooms, the view is theirs: a new calibration does not move it.
+    view.user_moved = True
+    view.opts["distance"] = 5.0
+    view.set_calibration(calibration, frustum_depth=1.0)
+    assert view.opts["distance"] == 5.0
