@@ -28,6 +28,7 @@ __all__ = [
     "Fate",
     "TrackState",
     "advance",
+    "lost_at_the_edge",
     "on_detected",
     "on_missed",
     "record_position",
@@ -69,9 +70,8 @@ class TrackState:
     #: appearance features of the first unoccluded detections (identity recovery)
     features: list[np.ndarray] = dataclasses.field(default_factory=list)
     recovery_done: bool = False
-    #: whether the detector flagged the track's latest detection ``out_of_view`` (the
-    #: person was cut by the image's edge)
-    last_out_of_view: bool = False
+    #: the latest detection the detector did not flag ``out_of_view`` (cut by the image's edge)
+    seen_in_view: float = -np.inf
 
     def position_at(self, t: float) -> tuple[float, float]:
         """Constant-velocity extrapolation of the filtered position to time t."""
@@ -94,12 +94,11 @@ def on_detected(
     ``hidden``: the detector flagged the detection partly hidden in a way that
     explains a weak confidence (``out_of_view``: partly outside the image; see
     ``explained_weak_detections``): in a run it weighs as a confident detection.
-    ``out_of_view``: the detector flagged it partly outside the image (when it is the
-    track's latest detection, the track goes MISSING only after
-    ``sec_before_missing_out_of_view``).
+    ``out_of_view``: the detector flagged it partly outside the image (see
+    :func:`lost_at_the_edge`).
     """
-    if t >= track.last_detection:
-        track.last_out_of_view = out_of_view
+    if not out_of_view:
+        track.seen_in_view = max(track.seen_in_view, t)
     track.detections += 1
     confident = confidence >= params.min_confidence_initialization
     if confident:
@@ -161,11 +160,10 @@ def advance(track: TrackState, now: float, params: Any) -> Fate:
     once ``detections_to_validate`` detections in a row confirm it: one stray
     detection (a false alarm in its wide gate) does not keep a lost track.
 
-    A validated track whose latest detection the detector flagged ``out_of_view``
-    (the person cut by the image's edge) goes MISSING after
-    ``sec_before_missing_out_of_view`` rather than ``sec_before_missing``: the detector
-    gives up on a person at the image's edge while much of them is still in the image.
-    Only the status changes (what the output smoother holds); association and
+    A validated track lost at the image's edge (:func:`lost_at_the_edge`) goes MISSING
+    after ``sec_before_missing_out_of_view`` rather than ``sec_before_missing``: the
+    detector gives up on a person at the image's edge while much of them is still in the
+    image. Only the status changes (what the output smoother holds); association and
     deletion go by the time unseen as for any track.
     """
     unseen = now - track.last_detection
@@ -176,11 +174,19 @@ def advance(track: TrackState, now: float, params: Any) -> Fate:
     if now - track.confirmed >= params.sec_before_old:
         return Fate.OLD
     missing_after = params.sec_before_missing
-    if track.last_out_of_view:
+    if lost_at_the_edge(track, params):
         missing_after = max(missing_after, params.sec_before_missing_out_of_view)
     if unseen >= missing_after or track.confirmed < track.last_detection:
         track.status = TrackStatus.MISSING
     return Fate.KEEP
+
+
+def lost_at_the_edge(track: TrackState, params: Any) -> bool:
+    """Whether every detection of the track's last ``sec_before_missing`` (before it was
+    last detected) was flagged ``out_of_view``: every sensor that saw the person at the
+    end saw them cut by its image's edge. One detection in full view among them (another
+    sensor still sees the person, who is lost for another reason) says no."""
+    return track.last_detection - track.seen_in_view >= params.sec_before_missing
 
 
 def record_position(track: TrackState, t: float, keep: float) -> None:

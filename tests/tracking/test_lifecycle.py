@@ -250,8 +250,8 @@ def test_a_track_lost_at_the_images_edge_goes_missing_after_sec_before_missing_o
     """The detector gives up on a person cut by the image's edge while much of them is
     still in the image: such a track stays unmissing (held in the output) for longer."""
     tracker = Tracker()
-    _run(tracker, 0.0, 1.0, 1.0)
-    tracker.update(_batch(1.0, 1.0, out_of_view=flagged))  # the latest detection
+    _run(tracker, 0.0, 0.7, 1.0)
+    _run(tracker, 0.7, 1.0 + 1e-6, 1.0, out_of_view=flagged)  # the last 0.3 s
     p = tracker.params
     assert (p.sec_before_missing, p.sec_before_missing_out_of_view) == (0.2, 0.6)
     assert _status_after(tracker, 1.0, 0.3) is (TrackStatus.NEW if flagged else TrackStatus.MISSING)
@@ -261,12 +261,21 @@ def test_a_track_lost_at_the_images_edge_goes_missing_after_sec_before_missing_o
     assert tracker.tracks == []
 
 
-def test_only_the_latest_detection_counts_for_the_out_of_view_hold() -> None:
+def test_only_a_track_seen_cut_by_the_edge_to_the_end_is_held() -> None:
     tracker = Tracker()
     _run(tracker, 0.0, 0.5, 1.0, out_of_view=True)
     _run(tracker, 0.5, 1.0, 1.0)  # back in full view, then lost
-    assert not tracker.tracks[0].last_out_of_view
     assert _status_after(tracker, 1.0 - 1 / RATE, 0.3) is TrackStatus.MISSING
+
+
+def test_a_track_another_sensor_saw_in_full_at_the_end_is_not_held() -> None:
+    """Sensor a loses the person at its image's edge while sensor b still sees them in
+    full (and then loses them for another reason): no hold."""
+    tracker = Tracker()
+    _run(tracker, 0.0, 1.0, 1.0)
+    tracker.update(_batch(1.0, 1.0, sensor="b"))
+    tracker.update(_batch(1.01, 1.0, out_of_view=True))
+    assert _status_after(tracker, 1.01, 0.3) is TrackStatus.MISSING
 
 
 def test_an_unvalidated_track_lost_at_the_images_edge_still_dies_at_once() -> None:

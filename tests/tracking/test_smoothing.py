@@ -91,8 +91,8 @@ def test_the_window_follows_a_live_parameter_change() -> None:
 
 
 def test_a_person_lost_at_the_images_edge_is_held_longer_in_the_output() -> None:
-    """Tracker and smoother together: a person whose last detections were flagged
-    out_of_view is shown sec_before_missing_out_of_view + drop_after after them (1.2 s),
+    """Tracker and smoother together: a person whose detections of the last 0.3 s were
+    flagged out_of_view is shown sec_before_missing_out_of_view + drop_after after them (1.2 s),
     one lost in full view sec_before_missing + drop_after (0.8 s)."""
 
     def shown_until(flagged: bool) -> float:
@@ -107,7 +107,7 @@ def test_a_person_lost_at_the_images_edge_is_held_longer_in_the_output() -> None
                         z=0.9,
                         height=1.7,
                         confidence=1.0,
-                        out_of_view=flagged and t > 0.8,
+                        out_of_view=flagged and t > 0.7,
                     )
                 ]
                 if t <= 1.0
