@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pyqtgraph.opengl as gl
-from PySide6.QtGui import QColor, QFont, QMatrix4x4, QVector3D, QVector4D
+from PySide6.QtCore import Qt
+from PySide6.QtGui import QColor, QFont, QMatrix4x4, QPainter, QVector3D, QVector4D
 from PySide6.QtWidgets import QSizePolicy
 
 from app.trails import TrailHistory, track_color
@@ -23,6 +24,35 @@ FRAME_Y = (-0.85, 0.85)
 
 def _rgba(rgb: tuple[int, int, int], alpha: float = 1.0) -> tuple[float, float, float, float]:
     return (rgb[0] / 255, rgb[1] / 255, rgb[2] / 255, alpha)
+
+
+class TaggedText(gl.GLTextItem):
+    """A name in the 3D view on a dark tag, so that it reads over bright points too."""
+
+    TAG = QColor(25, 28, 34, 200)
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.setDepthValue(10)  # painted after the clouds and meshes, never under them
+
+    def paint(self) -> None:
+        if not self.text:
+            return
+        self.setupGLState()
+        anchor = self.compute_projection().map(QVector3D(*self.pos)).toPointF()
+        point = self.align_text(anchor)
+        painter = QPainter(self.view())
+        painter.setFont(self.font)
+        painter.setRenderHints(
+            QPainter.RenderHint.Antialiasing | QPainter.RenderHint.TextAntialiasing
+        )
+        box = painter.fontMetrics().boundingRect(self.text).translated(point.toPoint())
+        painter.setPen(Qt.PenStyle.NoPen)
+        painter.setBrush(self.TAG)
+        painter.drawRoundedRect(box.adjusted(-3, -1, 3, 1), 3, 3)
+        painter.setPen(self.color)
+        painter.drawText(point, self.text)
+        painter.end()
 
 
 class WorldView(gl.GLViewWidget):
@@ -82,7 +112,7 @@ class WorldView(gl.GLViewWidget):
                 )
             else:
                 lines = gl.GLScatterPlotItem(pos=pose[None, :3, 3], color=FRUSTUM_COLOR, size=8)
-            label = gl.GLTextItem(
+            label = TaggedText(
                 pos=pose[:3, 3] + (0.0, 0.0, 0.15), text=sensor_id, color=QColor(150, 200, 255)
             )
             label.setData(font=self._font)
@@ -173,7 +203,7 @@ class WorldView(gl.GLViewWidget):
                     shader="shaded",
                     color=_rgba(track_color(track_id)),
                 )
-                label = gl.GLTextItem(text=str(track_id), color=QColor(255, 255, 255))
+                label = TaggedText(text=str(track_id), color=QColor(255, 255, 255))
                 label.setData(font=self._font)
                 self.addItem(mesh)
                 self.addItem(label)
