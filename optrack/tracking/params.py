@@ -221,15 +221,18 @@ TRACKING_PARAMS = register(
             ),
             Param(
                 "sec_before_missing_out_of_view",
-                0.6,
+                0.2,
                 min=0.0,
                 max=10.0,
                 step=0.05,
                 unit="s",
-                help="A validated track whose latest detection the detector flagged out_of_view "
-                "(cut by the image's edge) is MISSING only after this long unseen (never sooner "
-                "than sec_before_missing): the detector gives up on a person at the image's edge "
-                "while much of them is still in it, so the output holds them longer.",
+                help="A validated track lost at the image's edge (every detection of its last "
+                "sec_before_missing flagged out_of_view) is MISSING only after this long unseen "
+                "(never sooner than sec_before_missing), so the output holds it longer. Off by "
+                "default (0.2, as sec_before_missing): 0.6 holds such a person as long as "
+                "OpenPTrack's output holds everyone, which helps where people step back into a "
+                "single sensor's view but shows people who walked out of view, for good, where "
+                "they are not (docs/tracking.md).",
             ),
             Param(
                 "sec_before_old",

@@ -238,6 +238,18 @@ def test_a_weak_second_detection_beside_a_tracked_person_starts_no_track() -> No
     assert len(tracker.tracks) == 1
 
 
+HOLD = {"sec_before_missing_out_of_view": 0.6}
+
+
+def test_the_out_of_view_hold_is_off_by_default() -> None:
+    p = TRACKING_PARAMS.create()
+    assert p.sec_before_missing_out_of_view == p.sec_before_missing == 0.2
+    tracker = Tracker()
+    _run(tracker, 0.0, 0.7, 1.0)
+    _run(tracker, 0.7, 1.0 + 1e-6, 1.0, out_of_view=True)
+    assert _status_after(tracker, 1.0, 0.25) is TrackStatus.MISSING
+
+
 def _status_after(tracker: Tracker, last: float, unseen: float) -> TrackStatus:
     _run(tracker, last + 1 / RATE, last + unseen)  # nobody
     return tracker.tracks[0].status
@@ -249,11 +261,9 @@ def test_a_track_lost_at_the_images_edge_goes_missing_after_sec_before_missing_o
 ) -> None:
     """The detector gives up on a person cut by the image's edge while much of them is
     still in the image: such a track stays unmissing (held in the output) for longer."""
-    tracker = Tracker()
+    tracker = Tracker(TRACKING_PARAMS.create(HOLD))
     _run(tracker, 0.0, 0.7, 1.0)
     _run(tracker, 0.7, 1.0 + 1e-6, 1.0, out_of_view=flagged)  # the last 0.3 s
-    p = tracker.params
-    assert (p.sec_before_missing, p.sec_before_missing_out_of_view) == (0.2, 0.6)
     assert _status_after(tracker, 1.0, 0.3) is (TrackStatus.NEW if flagged else TrackStatus.MISSING)
     assert _status_after(tracker, 1.3, 0.35) is TrackStatus.MISSING
     # association and deletion are those of any track: it is deleted sec_before_old after
@@ -262,7 +272,7 @@ def test_a_track_lost_at_the_images_edge_goes_missing_after_sec_before_missing_o
 
 
 def test_only_a_track_seen_cut_by_the_edge_to_the_end_is_held() -> None:
-    tracker = Tracker()
+    tracker = Tracker(TRACKING_PARAMS.create(HOLD))
     _run(tracker, 0.0, 0.5, 1.0, out_of_view=True)
     _run(tracker, 0.5, 1.0, 1.0)  # back in full view, then lost
     assert _status_after(tracker, 1.0 - 1 / RATE, 0.3) is TrackStatus.MISSING
@@ -271,7 +281,7 @@ def test_only_a_track_seen_cut_by_the_edge_to_the_end_is_held() -> None:
 def test_a_track_another_sensor_saw_in_full_at_the_end_is_not_held() -> None:
     """Sensor a loses the person at its image's edge while sensor b still sees them in
     full (and then loses them for another reason): no hold."""
-    tracker = Tracker()
+    tracker = Tracker(TRACKING_PARAMS.create(HOLD))
     _run(tracker, 0.0, 1.0, 1.0)
     tracker.update(_batch(1.0, 1.0, sensor="b"))
     tracker.update(_batch(1.01, 1.0, out_of_view=True))
@@ -279,7 +289,7 @@ def test_a_track_another_sensor_saw_in_full_at_the_end_is_not_held() -> None:
 
 
 def test_an_unvalidated_track_lost_at_the_images_edge_still_dies_at_once() -> None:
-    tracker = Tracker()
+    tracker = Tracker(TRACKING_PARAMS.create(HOLD))
     tracker.update(_batch(0.0, 1.0, out_of_view=True))
     _run(tracker, 0.1, 0.25)  # empty batches
     assert tracker.tracks == []

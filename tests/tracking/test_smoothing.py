@@ -9,6 +9,7 @@ import pytest
 from optrack.evaluation.replay import replay
 from optrack.tracking import (
     SMOOTHING_PARAMS,
+    TRACKING_PARAMS,
     OutputSmoother,
     Tracker,
     heartbeat_message,
@@ -91,9 +92,10 @@ def test_the_window_follows_a_live_parameter_change() -> None:
 
 
 def test_a_person_lost_at_the_images_edge_is_held_longer_in_the_output() -> None:
-    """Tracker and smoother together: a person whose detections of the last 0.3 s were
-    flagged out_of_view is shown sec_before_missing_out_of_view + drop_after after them (1.2 s),
-    one lost in full view sec_before_missing + drop_after (0.8 s)."""
+    """Tracker and smoother together, with the hold on (0.6 s): a person whose detections
+    of the last 0.3 s were flagged out_of_view is shown sec_before_missing_out_of_view +
+    drop_after after them (1.2 s), one lost in full view sec_before_missing + drop_after
+    (0.8 s)."""
 
     def shown_until(flagged: bool) -> float:
         batches = []
@@ -115,7 +117,8 @@ def test_a_person_lost_at_the_images_edge_is_held_longer_in_the_output() -> None
             )
             batches.append(DetectionBatch(sensor_id="a", stamp=t, detections=people))
         times = [k / 100 for k in range(300)]
-        result = replay(batches, times, Tracker())
+        params = TRACKING_PARAMS.create({"sec_before_missing_out_of_view": 0.6})
+        result = replay(batches, times, Tracker(params))
         return max(t for t, out in zip(times, result.outputs, strict=True) if out.tracks)
 
     assert shown_until(False) == pytest.approx(1.0 + 0.8, abs=0.05)
