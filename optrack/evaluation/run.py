@@ -260,6 +260,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         "sensors": per_sensor,
         "tracks_started": tracker.next_id - 1,
         "appearance": tracker.appearance_enabled,
+        "out_of_view_hold": tracker.out_of_view_hold,
         "dropped_batches": tracker.dropped,
         "ms_per_update": round(ms_per_update, 4),
         "detection_ms": round(float(np.median([b.processing_ms for b in batches])), 2)

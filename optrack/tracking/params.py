@@ -221,18 +221,25 @@ TRACKING_PARAMS = register(
             ),
             Param(
                 "sec_before_missing_out_of_view",
-                0.2,
+                0.6,
                 min=0.0,
                 max=10.0,
                 step=0.05,
                 unit="s",
-                help="A validated track lost at the image's edge (every detection of its last "
-                "sec_before_missing flagged out_of_view) is MISSING only after this long unseen "
-                "(never sooner than sec_before_missing), so the output holds it longer. Off by "
-                "default (0.2, as sec_before_missing): 0.6 holds such a person as long as "
-                "OpenPTrack's output holds everyone, which helps where people step back into a "
-                "single sensor's view but shows people who walked out of view, for good, where "
-                "they are not (docs/tracking.md).",
+                help="Where the out-of-view hold applies, a validated track lost at the image's "
+                "edge (every detection of its last sec_before_missing flagged out_of_view) is "
+                "MISSING only after this long unseen (never sooner than sec_before_missing), "
+                "so the output holds it as long as OpenPTrack's output holds everyone.",
+            ),
+            Param(
+                "out_of_view_hold",
+                "off",
+                choices=("off", "on"),
+                help="Hold a track lost at the image's edge for sec_before_missing_out_of_view. "
+                "Off by default: it helps where people step back into a sensor's view, but "
+                "shows people who walked out of view for good where they are not, and over the "
+                "measured recordings, one sensor or several, it costs more than it gains "
+                "(docs/tracking.md).",
             ),
             Param(
                 "sec_before_old",

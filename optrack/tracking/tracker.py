@@ -139,6 +139,11 @@ class Tracker:
         count = self.sensor_count if self.sensor_count is not None else len(self.sensor_last)
         return count <= 1
 
+    @property
+    def out_of_view_hold(self) -> bool:
+        """Whether a track lost at the image's edge is held (``out_of_view_hold``)."""
+        return self.params.out_of_view_hold == "on"
+
     # ------------------------------------------------------------------ update
     def update(self, batch: DetectionBatch, now: float | None = None) -> TrackBatch | None:
         """Process one batch; return the tracks after it, or None when it was dropped.
@@ -531,8 +536,9 @@ class Tracker:
 
     def _advance(self, now: float) -> None:
         kept = []
+        hold = self.out_of_view_hold
         for track in self.tracks:
-            fate = advance(track, now, self.p)
+            fate = advance(track, now, self.p, hold_out_of_view=hold)
             if fate is Fate.KEEP:
                 kept.append(track)
             elif fate is Fate.OLD:

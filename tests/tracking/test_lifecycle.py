@@ -238,16 +238,21 @@ def test_a_weak_second_detection_beside_a_tracked_person_starts_no_track() -> No
     assert len(tracker.tracks) == 1
 
 
-HOLD = {"sec_before_missing_out_of_view": 0.6}
+HOLD = {"out_of_view_hold": "on"}
 
 
-def test_the_out_of_view_hold_is_off_by_default() -> None:
-    p = TRACKING_PARAMS.create()
-    assert p.sec_before_missing_out_of_view == p.sec_before_missing == 0.2
-    tracker = Tracker()
+@pytest.mark.parametrize(("sensors", "mode", "held"), [(1, None, False), (3, "on", True)])
+def test_the_out_of_view_hold_is_off_by_default_and_switchable(
+    sensors: int, mode: str | None, held: bool
+) -> None:
+    p = TRACKING_PARAMS.create({"out_of_view_hold": mode} if mode else {})
+    assert p.sec_before_missing_out_of_view == 0.6 and p.sec_before_missing == 0.2
+    tracker = Tracker(p, sensors=sensors)
+    assert tracker.out_of_view_hold is held
     _run(tracker, 0.0, 0.7, 1.0)
     _run(tracker, 0.7, 1.0 + 1e-6, 1.0, out_of_view=True)
-    assert _status_after(tracker, 1.0, 0.25) is TrackStatus.MISSING
+    expected = TrackStatus.NEW if held else TrackStatus.MISSING
+    assert _status_after(tracker, 1.0, 0.25) is expected
 
 
 def _status_after(tracker: Tracker, last: float, unseen: float) -> TrackStatus:

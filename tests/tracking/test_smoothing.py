@@ -117,7 +117,7 @@ def test_a_person_lost_at_the_images_edge_is_held_longer_in_the_output() -> None
             )
             batches.append(DetectionBatch(sensor_id="a", stamp=t, detections=people))
         times = [k / 100 for k in range(300)]
-        params = TRACKING_PARAMS.create({"sec_before_missing_out_of_view": 0.6})
+        params = TRACKING_PARAMS.create({"out_of_view_hold": "on"})
         result = replay(batches, times, Tracker(params))
         return max(t for t, out in zip(times, result.outputs, strict=True) if out.tracks)
 
