@@ -141,10 +141,15 @@ def opencv_sample_replica(folder: Path, supersample: int = 4) -> Replica:
         camera = stored.getNode("camera_matrix").mat()
         dist = stored.getNode("distortion_coefficients").mat().ravel()
         poses = [(row[:3], row[3:]) for row in stored.getNode("extrinsic_parameters").mat()]
-        size = (int(stored.getNode("image_width").real()), int(stored.getNode("image_height").real()))
+        size = (
+            int(stored.getNode("image_width").real()),
+            int(stored.getNode("image_height").real()),
+        )
     finally:
         stored.release()
     board = Checkerboard(9, 6, 0.025)
     images = render_views(PrintedBoard(board), camera, dist, size, poses, supersample=supersample)
-    corners = [cv2.projectPoints(board.object_points, r, t, camera, dist)[0][:, 0] for r, t in poses]
+    corners = [
+        cv2.projectPoints(board.object_points, r, t, camera, dist)[0][:, 0] for r, t in poses
+    ]
     return Replica(board, camera, dist, size, images, corners)

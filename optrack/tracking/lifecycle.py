@@ -153,9 +153,7 @@ def on_missed(track: TrackState, sensor: str, t: float) -> None:
         track.runs[sensor] = 0
 
 
-def advance(
-    track: TrackState, now: float, params: Any, *, hold_out_of_view: bool = False
-) -> Fate:
+def advance(track: TrackState, now: float, params: Any, *, hold_out_of_view: bool = False) -> Fate:
     """Update the status with the time ``now``; say whether the track lives on.
 
     A track found again after it went missing is seen (and kept alive) only
