@@ -128,14 +128,12 @@ def _replica_figures(folder: Path) -> dict[str, Any]:
     (:func:`optrack.calibration.printed.opencv_sample_replica`): our default corners, and
     OpenCV's calibration sample's 11-px window with every view kept, which is how
     left_intrinsics.yml (the reference above) was made."""
-    from optrack.calibration.board import CORNER_PARAMS, find_corners
+    from optrack.calibration.board import CORNER_PARAMS, OPENCV_SAMPLE_CORNERS, find_corners
     from optrack.calibration.intrinsics import INTRINSICS_PARAMS, calibrate_intrinsics
     from optrack.calibration.printed import opencv_sample_replica
 
     replica = opencv_sample_replica(folder)
-    opencv_sample = CORNER_PARAMS.create(
-        {"subpix_window": 11, "subpix_window_fraction": 0.0, "subpix_border_fraction": 0.0}
-    )
+    opencv_sample = CORNER_PARAMS.create(OPENCV_SAMPLE_CORNERS)
     keep_all = INTRINSICS_PARAMS.create({"fix_aspect_ratio": True, "max_rejection_rounds": 0})
     figures: dict[str, Any] = {"intrinsics_replica_true_fx": replica.fx}
     for suffix, corner_params, intrinsics_params in (
@@ -145,11 +143,7 @@ def _replica_figures(folder: Path) -> dict[str, Any]:
         found = [find_corners(image, replica.board, corner_params) for image in replica.images]
         views = [c for c in found if c is not None]
         result = calibrate_intrinsics(views, replica.board, replica.size, intrinsics_params)
-        errors = [
-            np.linalg.norm(c[:, None] - truth[None], axis=2).min(axis=1).max()
-            for c, truth in zip(found, replica.corners, strict=True)
-            if c is not None
-        ]
+        errors = [replica.corner_errors(k, c).max() for k, c in enumerate(found) if c is not None]
         figures[f"intrinsics_replica_fx{suffix}"] = result.intrinsics.fx
         figures[f"intrinsics_replica_fx_error_pct{suffix}"] = (
             (result.intrinsics.fx - replica.fx) / replica.fx * 100.0

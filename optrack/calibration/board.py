@@ -24,6 +24,7 @@ from optrack.params import Param, Params, Schema, register
 
 __all__ = [
     "CORNER_PARAMS",
+    "OPENCV_SAMPLE_CORNERS",
     "BoardError",
     "Checkerboard",
     "CoverageMap",
@@ -131,6 +132,14 @@ CORNER_PARAMS = register(
         help="Finding checkerboard corners in colour and infrared images.",
     )
 )
+
+#: OpenCV's calibration sample's corner refinement (an 11-pixel window whatever the squares'
+#: size), which made OpenCV's left_intrinsics.yml; ``calibration_corners`` values.
+OPENCV_SAMPLE_CORNERS = {
+    "subpix_window": 11,
+    "subpix_window_fraction": 0.0,
+    "subpix_border_fraction": 0.0,
+}
 
 
 @dataclasses.dataclass(frozen=True)

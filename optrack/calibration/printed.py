@@ -128,6 +128,12 @@ class Replica:
     def fx(self) -> float:
         return float(self.camera[0, 0])
 
+    def corner_errors(self, view: int, found: np.ndarray) -> np.ndarray:
+        """Each corner found in ``view``: its distance (px) to the nearest true corner (a
+        finder may number the corners from another end of the board)."""
+        truth = self.corners[view]
+        return np.linalg.norm(found[:, None] - truth[None], axis=2).min(axis=1)
+
 
 def opencv_sample_replica(folder: Path, supersample: int = 4) -> Replica:
     """OpenCV's sample board (9x6, 25 mm, outer columns cut to half a square) seen through

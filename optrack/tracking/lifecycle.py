@@ -153,17 +153,16 @@ def on_missed(track: TrackState, sensor: str, t: float) -> None:
         track.runs[sensor] = 0
 
 
-def advance(track: TrackState, now: float, params: Any, *, hold_out_of_view: bool = False) -> Fate:
+def advance(track: TrackState, now: float, params: Any) -> Fate:
     """Update the status with the time ``now``; say whether the track lives on.
 
     A track found again after it went missing is seen (and kept alive) only
     once ``detections_to_validate`` detections in a row confirm it: one stray
     detection (a false alarm in its wide gate) does not keep a lost track.
 
-    With ``hold_out_of_view`` (the tracker's ``out_of_view_hold``), a validated track lost
-    at the image's edge (:func:`lost_at_the_edge`) goes MISSING after
-    ``sec_before_missing_out_of_view`` rather than ``sec_before_missing``: the
-    detector gives up on a person at the image's edge while much of them is still in the
+    With ``out_of_view_hold`` on, a validated track lost at the image's edge
+    (:func:`lost_at_the_edge`) goes MISSING after ``sec_before_missing_out_of_view``
+    rather than ``sec_before_missing``: the detector gives up on a person at the image's edge while much of them is still in the
     image. Only the status changes (what the output smoother holds); association and
     deletion go by the time unseen as for any track.
     """
@@ -175,7 +174,7 @@ def advance(track: TrackState, now: float, params: Any, *, hold_out_of_view: boo
     if now - track.confirmed >= params.sec_before_old:
         return Fate.OLD
     missing_after = params.sec_before_missing
-    if hold_out_of_view and lost_at_the_edge(track, params):
+    if params.out_of_view_hold == "on" and lost_at_the_edge(track, params):
         missing_after = max(missing_after, params.sec_before_missing_out_of_view)
     if unseen >= missing_after or track.confirmed < track.last_detection:
         track.status = TrackStatus.MISSING

@@ -536,9 +536,8 @@ class Tracker:
 
     def _advance(self, now: float) -> None:
         kept = []
-        hold = self.out_of_view_hold
         for track in self.tracks:
-            fate = advance(track, now, self.p, hold_out_of_view=hold)
+            fate = advance(track, now, self.p)
             if fate is Fate.KEEP:
                 kept.append(track)
             elif fate is Fate.OLD:

@@ -7,7 +7,12 @@ import numpy as np
 import pytest
 import yaml
 
-from optrack.calibration.board import CORNER_PARAMS, Checkerboard, find_corners
+from optrack.calibration.board import (
+    CORNER_PARAMS,
+    OPENCV_SAMPLE_CORNERS,
+    Checkerboard,
+    find_corners,
+)
 from optrack.calibration.intrinsics import (
     INTRINSICS_PARAMS,
     IntrinsicsError,
@@ -80,9 +85,7 @@ def _opencv_sample_corners(opencv):
     the squares' size), which is how left_intrinsics.yml was made (with flags=2,
     CALIB_FIX_ASPECT_RATIO)."""
     paths = sorted(opencv.glob("left*.jpg"))
-    params = CORNER_PARAMS.create(
-        {"subpix_window": 11, "subpix_window_fraction": 0.0, "subpix_border_fraction": 0.0}
-    )
+    params = CORNER_PARAMS.create(OPENCV_SAMPLE_CORNERS)
     found, size = corners_from_images(paths, BOARD, params=params)
     return [c for c in found if c is not None], size, [p.name for p in paths]
 

@@ -13,12 +13,16 @@ import cv2
 import numpy as np
 import pytest
 
-from optrack.calibration.board import CORNER_PARAMS, Checkerboard, find_corners
+from optrack.calibration.board import (
+    CORNER_PARAMS,
+    OPENCV_SAMPLE_CORNERS,
+    Checkerboard,
+    find_corners,
+)
 from optrack.calibration.intrinsics import INTRINSICS_PARAMS, calibrate_intrinsics
 from optrack.calibration.printed import opencv_sample_replica
 
 BOARD = Checkerboard(9, 6, 0.025)
-OPENCV_SAMPLE = {"subpix_window": 11, "subpix_window_fraction": 0.0, "subpix_border_fraction": 0.0}
 
 
 @pytest.fixture(scope="module")
@@ -26,31 +30,27 @@ def replica(opencv_data):
     return opencv_sample_replica(opencv_data, supersample=2)
 
 
-def _errors(corners: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """Each found corner's distance to the nearest true one (the corner order is free)."""
-    return np.linalg.norm(corners[:, None] - truth[None], axis=2).min(axis=1)
-
-
 def test_the_replica_looks_like_the_real_views_to_the_corner_finder(replica, opencv_data):
     """Same camera, same poses: the board is found in all 13 rendered views, at the corners
     OpenCV's file says the real views have (within its 0.39 px RMS)."""
-    images, truth = replica.images, replica.corners
+    images = replica.images
     assert len(images) == 13 and images[0].shape == (480, 640) and images[0].dtype == np.uint8
     found = [find_corners(image, BOARD) for image in images]
     assert all(c is not None for c in found)
     real = find_corners(cv2.imread(str(opencv_data / "left01.jpg")), BOARD)
-    assert np.median(_errors(real, truth[0])) < 0.6
+    assert np.median(replica.corner_errors(0, real)) < 0.6
 
 
 def test_default_corners_recover_the_true_focal_length_and_opencvs_window_inflates_it(replica):
-    images, truth, fx, size = replica.images, replica.corners, replica.fx, replica.size
+    images, fx, size = replica.images, replica.fx, replica.size
+    opencv_sample = CORNER_PARAMS.create(OPENCV_SAMPLE_CORNERS)
     clean = [find_corners(image, BOARD) for image in images]
-    pulled = [find_corners(image, BOARD, CORNER_PARAMS.create(OPENCV_SAMPLE)) for image in images]
+    pulled = [find_corners(image, BOARD, opencv_sample) for image in images]
     # The default corners are within a fraction of a pixel of the truth everywhere.
-    assert max(_errors(c, t).max() for c, t in zip(clean, truth, strict=True)) < 0.5
+    assert max(replica.corner_errors(k, c).max() for k, c in enumerate(clean)) < 0.5
     # OpenCV's 11-px window reaches the cut squares of left02 (index 1): its border corners
     # move by pixels, as in the real view (6.3 px), and the inner ones do not.
-    left02 = _errors(pulled[1], truth[1])
+    left02 = replica.corner_errors(1, pulled[1])
     assert left02.max() > 3.0 and np.median(left02) < 0.3
     keep_all = INTRINSICS_PARAMS.create({"fix_aspect_ratio": True, "max_rejection_rounds": 0})
     ours = calibrate_intrinsics(clean, BOARD, size, keep_all)
