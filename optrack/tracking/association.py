@@ -19,6 +19,9 @@ the tracker loop reads top to bottom and each piece is tested on its own.
   is the Gaussian negative log-likelihood ``d2 + ln|S|`` rather than ``d2``
   alone, so that a long-lost track, whose wide ``S`` makes every ``d2`` small,
   cannot take a detection from a track that predicts it sharply.
+* :func:`weak_revival` says which weak detections may still take a track that
+  went missing moments ago: those the detector flags partly hidden, where the
+  track predicts the person.
 * :func:`assign` solves the assignment with scipy's ``linear_sum_assignment``.
 """
 
@@ -40,6 +43,7 @@ __all__ = [
     "measurement_noise",
     "measurements",
     "reach",
+    "weak_revival",
     "within_reach",
 ]
 
@@ -167,3 +171,26 @@ def within_reach(
     """(N, M) pairs whose detection is within each track's reach of where it was last seen."""
     distance = np.linalg.norm(positions[None, :, :] - last_seen[:, None, :], axis=2)
     return distance <= reach(unseen, max_speed, min_reach)[:, None]
+
+
+def weak_revival(
+    positions: np.ndarray,
+    hidden: np.ndarray,
+    predicted: np.ndarray,
+    unseen: np.ndarray,
+    window: float,
+    radius: float,
+) -> np.ndarray:
+    """(N, M) pairs where a detection too weak to start a track may still take a missing one.
+
+    Someone who steps out from behind another person or piece of furniture is
+    detected weakly at first, and the detector says why (``hidden`` (M,): flagged
+    occluded or partly outside the image). Such a detection may take a track lost
+    for at most ``window`` seconds (``unseen`` (N,)) that predicts the person
+    within ``radius`` of it (``predicted`` (N, 2)). Anything else weak still cannot
+    revive a lost track: furniture's weak false alarms would keep it alive.
+    """
+    if window <= 0:
+        return np.zeros((len(predicted), len(positions)), dtype=bool)
+    distance = np.linalg.norm(positions[None, :, :] - predicted[:, None, :], axis=2)
+    return (unseen <= window)[:, None] & hidden[None, :] & (distance <= radius)

@@ -220,6 +220,19 @@ TRACKING_PARAMS = register(
                 help="A track no sensor has detected for this long is MISSING.",
             ),
             Param(
+                "sec_weak_revival",
+                0.5,
+                min=0.0,
+                max=10.0,
+                step=0.05,
+                unit="s",
+                help="A track lost for at most this long may be taken back by a detection too "
+                "weak to start a track, if the detector flags it partly hidden (behind "
+                "something, or at the image's edge) and it lies within min_reach of where the "
+                "track predicts the person: someone stepping out from behind someone else is "
+                "detected weakly at first. 0 lets no weak detection revive a lost track.",
+            ),
+            Param(
                 "sec_before_missing_out_of_view",
                 0.6,
                 min=0.0,

@@ -42,6 +42,7 @@ from optrack.tracking.association import (
     measurement_noise,
     measurements,
     reach,
+    weak_revival,
     within_reach,
 )
 from optrack.tracking.lifecycle import (
@@ -249,10 +250,16 @@ class Tracker:
         )
         # a weak detection some track (even a lost one) could take is no new person
         explained = allowed.any(axis=0)
-        # a detection too weak to start a confident track cannot revive a missing one
+        # a detection too weak to start a confident track cannot revive a missing one, unless
+        # the detector explains its weakness and the track, lost moments ago, predicts the
+        # person right there (someone stepping out from behind someone else)
         missing = np.array([t - tr.confirmed for tr in tracks]) >= p.sec_before_missing
         weak = confidence < p.min_confidence_initialization
-        allowed &= ~(missing[:, None] & weak[None, :])
+        hidden = np.array([d.occluded or d.out_of_view for d in detections], dtype=bool)
+        revivable = weak_revival(
+            positions, hidden, x_prior[:, 0:2], unseen, p.sec_weak_revival, p.min_reach
+        )
+        allowed &= ~(missing[:, None] & weak[None, :] & ~revivable)
         if features is not None:
             # a person lost for long is not given someone their classifier clearly rejects
             lost = self._missing_candidates(t, set())

@@ -15,6 +15,7 @@ from optrack.tracking.association import (
     mahalanobis,
     measurement_noise,
     measurements,
+    weak_revival,
     within_reach,
 )
 from optrack.types import Detection, DetectionBatch
@@ -126,3 +127,20 @@ def test_a_lost_track_with_a_wide_covariance_does_not_take_a_sharply_predicted_d
     tracker.update(DetectionBatch("a", 2.0, detections=[_detection(0.15, 0.0)]))
     assert still.last_detection == 2.0
     assert lost.last_detection < 0.5
+
+
+def test_weak_revival_needs_a_flag_a_recent_loss_and_the_predicted_place() -> None:
+    positions = np.array([[0.0, 0.0], [0.0, 0.3], [2.0, 0.0]])
+    hidden = np.array([True, False, True])
+    predicted = np.array([[0.0, 0.1], [2.0, 0.2]])
+    unseen = np.array([0.3, 0.9])
+    got = weak_revival(positions, hidden, predicted, unseen, window=0.5, radius=0.5)
+    # track 0 (lost 0.3 s): the flagged detection beside it; the unflagged one does not count
+    # track 1 (lost 0.9 s): too long ago, even for the flagged detection on its prediction
+    assert got.tolist() == [[True, False, False], [False, False, False]]
+    assert not weak_revival(positions, hidden, predicted, unseen, 0.0, 0.5).any()
+    assert weak_revival(positions, hidden, predicted, unseen, 1.0, 0.5).tolist()[1] == [
+        False,
+        False,
+        True,
+    ]

@@ -298,3 +298,44 @@ def test_an_unvalidated_track_lost_at_the_images_edge_still_dies_at_once() -> No
     tracker.update(_batch(0.0, 1.0, out_of_view=True))
     _run(tracker, 0.1, 0.25)  # empty batches
     assert tracker.tracks == []
+
+
+@pytest.mark.parametrize(
+    ("window", "gap", "flags", "revived"),
+    [
+        (0.5, 0.3, {"occluded": True}, True),  # steps out from behind someone
+        (0.5, 0.3, {"out_of_view": True}, True),  # steps back in at the image's edge
+        (0.5, 0.3, {}, False),  # weak and unexplained: could be furniture
+        (0.5, 0.8, {"occluded": True}, False),  # lost too long ago
+        (0.0, 0.3, {"occluded": True}, False),  # revival switched off
+    ],
+)
+def test_a_weak_partly_hidden_detection_revives_a_track_lost_moments_ago(
+    window: float, gap: float, flags: dict[str, bool], revived: bool
+) -> None:
+    """Someone hidden for a moment behind someone else is detected weakly when they step
+    out; the detector flags why, and the track lost moments ago takes them back."""
+    tracker = Tracker(TRACKING_PARAMS.create({"sec_weak_revival": window}))
+    weak = tracker.params.min_confidence_initialization - 0.7
+    assert weak >= tracker.params.min_confidence_detections
+    _run(tracker, 0.0, 1.0, 1.0)
+    (track,) = tracker.tracks
+    _run(tracker, 1.0, 1.0 + gap)  # hidden: nothing detected
+    assert tracker.output().tracks[0].status == "missing"
+    _run(tracker, 1.0 + gap, 1.2 + gap, 1.0, confidence=weak, **flags)
+    assert tracker.tracks == [track]  # no second track either way
+    status = tracker.output().tracks[0].status
+    assert (status != "missing") is revived
+    assert (tracker.tracks[0].last_detection > 1.0 + gap) is revived
+
+
+def test_a_weak_partly_hidden_detection_away_from_the_prediction_revives_nothing() -> None:
+    """Only where the lost track predicts the person (within min_reach)."""
+    tracker = Tracker()
+    weak = tracker.params.min_confidence_initialization - 0.7
+    _run(tracker, 0.0, 1.0, 1.0)
+    _run(tracker, 1.0, 1.3)
+    far = 1.0 + tracker.params.min_reach + 0.2
+    _run(tracker, 1.3, 1.5, far, confidence=weak, occluded=True)
+    assert tracker.tracks[0].last_detection < 1.0
+    assert tracker.output().tracks[0].status == "missing"
