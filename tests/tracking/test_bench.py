@@ -5,14 +5,17 @@ from __future__ import annotations
 from optrack.evaluation.clear_mot import MotScore
 from optrack.evaluation.synthetic import crowd_scene, render
 from optrack.tracking.bench import (
+    OURS_GRID,
     BenchStream,
     _compare,
     _oracle_setting,
+    ours_grid,
     run_norfair,
     run_ours,
     single_setting,
     speed_20x10,
 )
+from optrack.tracking.params import TRACKING_PARAMS
 
 
 def _stream(seconds: float = 8.0) -> BenchStream:
@@ -82,3 +85,32 @@ def test_norfair_is_reported_with_its_oracle_and_its_single_setting() -> None:
         assert entry["better_than_norfair_single"] == (
             ours["mota"] > one["mota"] and ours["idsw"] < one["idsw"]
         )
+        # ours tuned on the stream: the best of our grid, never worse than the defaults
+        tuned = entry["ours_tuned"]
+        assert tuned["settings"] in ours_grid()
+        assert (tuned["mota"], -tuned["idsw"]) >= (ours["mota"], -ours["idsw"])
+        assert entry["better_tuned_than_norfair"] == (
+            tuned["mota"] > oracle["mota"] and tuned["idsw"] < oracle["idsw"]
+        )
+
+
+def test_our_grid_starts_at_the_defaults_and_holds_valid_settings() -> None:
+    """Tuned per stream, our tracker's first grid point is what it runs untuned; every
+    point is a setting the parameter schema accepts."""
+    settings = ours_grid()
+    assert len(settings) == 4 and len({tuple(s.items()) for s in settings}) == 4
+    defaults = TRACKING_PARAMS.create()
+    assert all(getattr(defaults, name) == values[0] for name, values in OURS_GRID.items())
+    for setting in settings:
+        TRACKING_PARAMS.create(setting)
+
+
+def test_the_tuned_entry_is_the_best_of_our_grid_on_the_stream() -> None:
+    """The tuned entry reports the grid point that scores best on the stream (each point
+    scored independently here)."""
+    stream = _stream(6.0)
+    scores = [run_ours(stream, s)[0] for s in ours_grid()]
+    out = _compare([stream], min_confidence=-1.5, norfair_ok=True)
+    best = max(scores, key=lambda m: (m.mota, -m.idsw))
+    assert out["tiny"]["ours_tuned"]["mota"] == round(best.mota, 4)
+    assert out["tiny"]["ours_tuned"]["idsw"] == best.idsw
