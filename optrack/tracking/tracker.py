@@ -255,11 +255,13 @@ class Tracker:
         # person right there (someone stepping out from behind someone else)
         missing = np.array([t - tr.confirmed for tr in tracks]) >= p.sec_before_missing
         weak = confidence < p.min_confidence_initialization
-        hidden = np.array([d.occluded or d.out_of_view for d in detections], dtype=bool)
-        revivable = weak_revival(
-            positions, hidden, x_prior[:, 0:2], unseen, p.sec_weak_revival, p.min_reach
-        )
-        allowed &= ~(missing[:, None] & weak[None, :] & ~revivable)
+        barred = missing[:, None] & weak[None, :]
+        if barred.any():
+            hidden = np.array([_hidden(d, "out_of_view_or_occluded") for d in detections])
+            barred &= ~weak_revival(
+                positions, hidden, x_prior[:, 0:2], unseen, p.sec_weak_revival, p.min_reach
+            )
+            allowed &= ~barred
         if features is not None:
             # a person lost for long is not given someone their classifier clearly rejects
             lost = self._missing_candidates(t, set())
