@@ -304,6 +304,12 @@ Matrix4 = tuple[
 ]
 
 
+def as_matrix4(pose: np.ndarray) -> Matrix4:
+    """A 4x4 pose as the nested tuples of floats that messages and files carry."""
+    rows = np.asarray(pose, dtype=np.float64).reshape(4, 4)
+    return tuple(tuple(float(v) for v in row) for row in rows)  # type: ignore[return-value]
+
+
 def _check_rigid(name: str, matrix: np.ndarray, tolerance: float = 1e-4) -> None:
     if matrix.shape != (4, 4) or not np.all(np.isfinite(matrix)):
         raise ValueError(f"{name} must be a finite 4x4 matrix.")
