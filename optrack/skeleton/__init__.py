@@ -1,0 +1,1 @@
+"""Whole-body skeleton tracking (MDCA): body model, likelihood, annealed particle filter."""
