@@ -391,7 +391,7 @@ def _floor_factor(
 
 
 @dataclasses.dataclass
-class _Instant:
+class Instant:
     """The views of one instant; ``added``: sensors whose corners are in the graph."""
 
     index: int
@@ -448,7 +448,7 @@ class _Graph:
         return _camera_key(self.camera_index[sensor])
 
     def instant_factors(
-        self, instant: _Instant, sensors: Iterable[str], *, floor: bool, anchor: bool
+        self, instant: Instant, sensors: Iterable[str], *, floor: bool, anchor: bool
     ) -> gtsam.NonlinearFactorGraph:
         """One reprojection factor per corner of each of ``sensors``' views (eq. 1-2), and
         with ``floor`` the board's floor constraint (eq. 3-4)."""
@@ -576,7 +576,7 @@ class NetworkCalibrator:
         self.params = params if params is not None else NETWORK_PARAMS.create()
         self.preferred_root = root
         self.tree = CalibrationTree()
-        self.instants: list[_Instant] = []
+        self.instants: list[Instant] = []
         self.status = {sid: SensorStatus() for sid in sorted(self.intrinsics)}
         self.covisibility: dict[tuple[str, str], int] = {}
         self.graph = _Graph(board, self.intrinsics, self.params)
@@ -640,7 +640,7 @@ class NetworkCalibrator:
         return True
 
     def _accept(self, views: dict[str, BoardView], floor: bool) -> None:
-        instant = _Instant(len(self.instants), views, floor)
+        instant = Instant(len(self.instants), views, floor)
         self.instants.append(instant)
         for sid in views:
             self.status[sid].views += 1
@@ -654,7 +654,7 @@ class NetworkCalibrator:
             self._update_incremental()
 
     # ----------------------------------------------------------- building
-    def _addable(self, instant: _Instant) -> list[str]:
+    def _addable(self, instant: Instant) -> list[str]:
         """Sensors of an instant whose corners can enter the graph now."""
         calibrated = sorted(s for s in instant.views if self.tree.calibrated(s))
         if instant.added:
@@ -682,7 +682,7 @@ class NetworkCalibrator:
                 placed[child] = pose
         return placed
 
-    def _board_initial(self, instant: _Instant, cameras: Mapping[str, np.ndarray]) -> np.ndarray:
+    def _board_initial(self, instant: Instant, cameras: Mapping[str, np.ndarray]) -> np.ndarray:
         """network_T_board from the best view of a placed camera."""
         best = max(
             (v for v in instant.views.values() if v.sensor_id in cameras),
@@ -692,7 +692,7 @@ class NetworkCalibrator:
 
     def _add_instant(
         self,
-        instant: _Instant,
+        instant: Instant,
         sensors: list[str],
         cameras: Mapping[str, np.ndarray],
         values: gtsam.Values,
