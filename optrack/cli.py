@@ -14,7 +14,6 @@ import json
 import sys
 import time
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 from optrack import __version__
@@ -53,74 +52,6 @@ def resolve(handler: str | Handler) -> Handler:
 # ------------------------------------------------------------------ commands
 
 
-def cmd_cloud(args: argparse.Namespace) -> int:
-    """Back-project a depth image (or a recording's frame) into a .pcd file."""
-    import numpy as np
-
-    from optrack.geometry import backproject
-    from optrack.io.images import read_color_image, read_depth_image
-    from optrack.io.pcd import write_pcd
-    from optrack.recording import Recording, is_recording
-    from optrack.types import Intrinsics, RGBDFrame
-
-    source = Path(args.input)
-    if not args.out.lower().endswith(".pcd"):
-        raise CommandError(f"--out {args.out} must name a .pcd file.")
-    if is_recording(source):
-        recording = Recording(source)
-        sensor = args.sensor or recording.sensor_ids[0]
-        frame = recording.frame(sensor, args.frame)
-        if args.intrinsics:
-            frame.intrinsics = Intrinsics.parse(args.intrinsics, *frame.depth.shape[::-1])
-        if args.depth_scale is not None:
-            frame.depth_scale = args.depth_scale
-    else:
-        if source.is_dir():
-            raise CommandError(
-                f"{source} is a directory but not an optrack recording (no manifest.yaml); "
-                "give a depth image or a recording."
-            )
-        if not args.intrinsics:
-            raise CommandError(
-                "a depth image needs --intrinsics fx,fy,cx,cy (pixels), e.g. --intrinsics 525,525,320,240."
-            )
-        depth = read_depth_image(source)
-        height, width = depth.shape
-        intrinsics = Intrinsics.parse(args.intrinsics, width, height)
-        scale = args.depth_scale if args.depth_scale is not None else 0.001
-        if depth.dtype != np.uint16:
-            scale = 1.0  # float images are metres
-        color = read_color_image(args.color) if args.color else None
-        if color is not None and color.shape[:2] != depth.shape:
-            raise CommandError(
-                f"colour image {args.color} is {color.shape[1]}x{color.shape[0]} but the depth "
-                f"image is {width}x{height}; give a registered colour image of the same size."
-            )
-        frame = RGBDFrame(depth, intrinsics, sensor_id=source.stem, depth_scale=scale, color=color)
-    cloud = backproject(frame.depth_m(), frame.intrinsics)
-    colors = (
-        frame.color
-        if frame.color is not None and frame.color.shape[:2] == frame.depth.shape
-        else None
-    )
-    write_pcd(args.out, cloud, colors)
-    valid = int(np.count_nonzero(np.isfinite(cloud[..., 2])))
-    height, width = frame.depth.shape
-    if args.json:
-        emit_json(
-            {
-                "out": args.out,
-                "points": valid,
-                "width": width,
-                "height": height,
-                "color": colors is not None,
-            }
-        )
-    else:
-        info(f"wrote {args.out}: {width}x{height} organised cloud, {valid} valid points.")
-    return EXIT_OK
-
-
 # Each benchmark is a handler "module:function" taking the parsed arguments.
 BENCHES: dict[str, str] = {
     "sim": "optrack.sim.bench:cmd_bench_sim",
@@ -155,7 +86,8 @@ def cmd_gui(args: argparse.Namespace) -> int:
 # ------------------------------------------------------------------- parser
 
 
-def _add_json(parser: argparse.ArgumentParser) -> None:
+def add_json(parser: argparse.ArgumentParser) -> None:
+    """The --json flag every measuring command has."""
     parser.add_argument(
         "--json", action="store_true", help="print one JSON object on stdout (logs go to stderr)"
     )
@@ -169,6 +101,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"optrack {__version__}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    from optrack.detection import cli as detection_cli
+    from optrack.io import cli as io_cli
+    from optrack.sensors import cli as sensors_cli
 
     def command(
         name: str, help: str, handler: Callable[[argparse.Namespace], int], parent: Any = commands
@@ -197,48 +133,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="sensor model for every sensor",
     )
     p.add_argument("--config", help="YAML parameter file (sim_* stages, e.g. sim_kinect1)")
-    _add_json(p)
+    add_json(p)
 
-    # detect
-    p = command(
-        "detect",
-        "Detect people in a point cloud, a recording or a live sensor.",
-        "optrack.detection.cli:cmd_detect",
-    )
-    p.add_argument("input", help=".pcd file, depth image, recording directory or sensor URI")
-    p.add_argument("--intrinsics", help="fx,fy,cx,cy in pixels (needed for a bare .pcd)")
-    floor = p.add_mutually_exclusive_group()
-    floor.add_argument(
-        "--ground", help="ground plane a,b,c,d in the camera frame (default: automatic)"
-    )
-    floor.add_argument(
-        "--ground-points",
-        help="three floor points 'x1,y1,z1;x2,y2,z2;x3,y3,z3' (metres, camera frame)",
-    )
-    floor.add_argument(
-        "--ground-pixels",
-        help="three floor pixels 'u1,v1;u2,v2;u3,v3' of the organised .pcd or depth image",
-    )
-    floor.add_argument(
-        "--ground-pick",
-        help="x,y,z (metres, camera frame): the segmented plane nearest this point is the floor",
-    )
-    p.add_argument("--config", help="YAML parameter file")
-    p.add_argument(
-        "--sensor-model",
-        choices=("kinect1", "kinect2", "sr4500", "stereo", "pcl", "default"),
-        help="parameter defaults of this sensor model (default: the recording's; PCL's for a .pcd)",
-    )
-    p.add_argument("--preset", choices=("children",), help="parameter preset on top of the model")
-    p.add_argument("--sensor", help="recording: only this sensor (default: all)")
-    p.add_argument("--frames", type=int, help="recording or sensor: stop after this many frames")
-    p.add_argument("--color", help="depth image: registered colour image of the same size")
-    p.add_argument(
-        "--depth-scale",
-        type=float,
-        help="depth image: metres per unit (default 0.001: millimetres)",
-    )
-    _add_json(p)
+    detection_cli.add_commands(commands, command)
 
     # eval
     p = command(
@@ -254,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("auto", "on", "off"),
         help="appearance recovery of identities (default: the config's, auto: on for one sensor)",
     )
-    _add_json(p)
+    add_json(p)
 
     # calibrate
     p = commands.add_parser(
@@ -280,7 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument(
         "--config", help="YAML parameter file (calibration_corners, calibration_intrinsics)"
     )
-    _add_json(q)
+    add_json(q)
     q = command(
         "stereo",
         "Relative pose of a stereo pair from chessboard image pairs.",
@@ -291,7 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--square", type=float, required=True, help="square size, m")
     q.add_argument("--left", nargs="+", required=True, help="left images")
     q.add_argument("--right", nargs="+", required=True, help="right images (same order)")
-    _add_json(q)
+    add_json(q)
     q = command(
         "network",
         "Calibrate every sensor of a recording (checkerboard, ground).",
@@ -310,7 +207,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="auto",
         help="which views lie on the floor: auto (depth test), none, after:SECONDS",
     )
-    _add_json(q)
+    add_json(q)
     q = command(
         "refine",
         "Refine a calibration from one person walking.",
@@ -329,7 +226,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="full",
         help="full: also level each camera's tilt (Algorithm 1); heading: keep the tilts",
     )
-    _add_json(q)
+    add_json(q)
     q = command(
         "ground",
         "Set the world frame: boards lying on the floor, or points of known coordinates.",
@@ -346,7 +243,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--board-thickness", type=float, help="board face above the floor when laid on it, m"
     )
     q.add_argument("--floor", default="auto", help="views on the floor: auto, all, after:SECONDS")
-    _add_json(q)
+    add_json(q)
     q = command(
         "board",
         "Write a printable checkerboard (PDF or PNG) with its size printed on it.",
@@ -358,7 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--out", required=True, help="output .pdf or .png")
     q.add_argument("--paper", default="fit", help="fit, a4, a3, a2, a1, a0 or letter")
     q.add_argument("--dpi", type=int, default=300, help="PNG resolution (default 300)")
-    _add_json(q)
+    add_json(q)
     q = command(
         "export",
         "Export a calibration as OpenPTrack's camera_poses.yaml or ROS static transforms.",
@@ -369,7 +266,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--format", required=True, choices=("openptrack", "ros"), help="what to write")
     q.add_argument("--out", required=True, help="file to write")
     q.add_argument("--parent", default="world", help="ROS parent frame (default world)")
-    _add_json(q)
+    add_json(q)
     q = command(
         "truth",
         "Write a recording's true sensor poses as a calibration file (optionally perturbed).",
@@ -380,7 +277,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--out", required=True, help="calibration file to write")
     q.add_argument("--perturb", metavar="M,DEG", help="move each sensor M metres, turn it DEG")
     q.add_argument("--seed", type=int, default=0, help="seed of the perturbation's directions")
-    _add_json(q)
+    add_json(q)
     q = command(
         "live",
         "The calibration wizard without a window: extrinsics, floor, refinement on a running site.",
@@ -409,7 +306,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="seconds of one person walking for the refinement (0: no refinement)",
     )
     q.add_argument("--no-publish", action="store_true", help="save only; do not send to the nodes")
-    _add_json(q)
+    add_json(q)
 
     # bench
     p = command(
@@ -422,7 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=tuple(BENCHES),
         help="what to measure",
     )
-    _add_json(p)
+    add_json(p)
 
     # run
     p = command(
@@ -468,51 +365,9 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--no-site", action="store_true", help="open without a site")
     p.add_argument("--site", help="site name (default: the configuration's site.name)")
 
-    # sensors / record
-    p = command(
-        "sensors",
-        "List the depth cameras attached to this computer.",
-        "optrack.sensors.cli:cmd_sensors",
-    )
-    p.add_argument(
-        "--udev-rules",
-        action="store_true",
-        help="print the udev rules that let users open the cameras (Linux) and exit",
-    )
-    _add_json(p)
-    p = command("record", "Record live sensors into a recording.", "optrack.sensors.cli:cmd_record")
-    p.add_argument(
-        "--sensor",
-        action="append",
-        required=True,
-        metavar="URI",
-        help="sensor URI (repeat for several)",
-    )
-    p.add_argument("--seconds", type=float, required=True, help="how long to record, s")
-    p.add_argument("--out", required=True, help="output recording directory (must be new)")
-    _add_json(p)
+    sensors_cli.add_commands(commands, command)
 
-    # cloud
-    p = command(
-        "cloud",
-        "Back-project a depth image or a recording frame into a .pcd point cloud.",
-        cmd_cloud,
-    )
-    p.add_argument("input", help="16-bit depth image (TIFF/PNG) or recording directory")
-    p.add_argument(
-        "--intrinsics",
-        help="fx,fy,cx,cy in pixels (required for an image; a recording has its own)",
-    )
-    p.add_argument(
-        "--depth-scale", type=float, help="metres per depth unit (default 0.001: millimetres)"
-    )
-    p.add_argument("--color", help="registered colour image for a depth image (same size)")
-    p.add_argument("--sensor", help="recording: sensor id (default: the first)")
-    p.add_argument(
-        "--frame", type=int, default=0, help="recording: frame number of that sensor (default 0)"
-    )
-    p.add_argument("--out", required=True, help="output .pcd file")
-    _add_json(p)
+    io_cli.add_commands(commands, command)
 
     # node
     p = commands.add_parser(

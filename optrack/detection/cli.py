@@ -35,7 +35,7 @@ from optrack.geometry import Plane
 from optrack.params import Params, load_config
 from optrack.types import DetectionBatch, Intrinsics, RGBDFrame
 
-__all__ = ["DetectError", "cmd_detect"]
+__all__ = ["DetectError", "add_commands", "cmd_detect"]
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".pgm", ".exr")
 
@@ -331,3 +331,48 @@ def cmd_detect(args: argparse.Namespace) -> int:
                 f"confidence={d['confidence']:.2f}"
             )
     return 0
+
+
+def add_commands(commands: Any, command: Any) -> None:
+    """Declare this package's commands on the ``optrack`` parser (see optrack/cli.py)."""
+    from optrack.cli import add_json
+
+    p = command(
+        "detect",
+        "Detect people in a point cloud, a recording or a live sensor.",
+        "optrack.detection.cli:cmd_detect",
+    )
+    p.add_argument("input", help=".pcd file, depth image, recording directory or sensor URI")
+    p.add_argument("--intrinsics", help="fx,fy,cx,cy in pixels (needed for a bare .pcd)")
+    floor = p.add_mutually_exclusive_group()
+    floor.add_argument(
+        "--ground", help="ground plane a,b,c,d in the camera frame (default: automatic)"
+    )
+    floor.add_argument(
+        "--ground-points",
+        help="three floor points 'x1,y1,z1;x2,y2,z2;x3,y3,z3' (metres, camera frame)",
+    )
+    floor.add_argument(
+        "--ground-pixels",
+        help="three floor pixels 'u1,v1;u2,v2;u3,v3' of the organised .pcd or depth image",
+    )
+    floor.add_argument(
+        "--ground-pick",
+        help="x,y,z (metres, camera frame): the segmented plane nearest this point is the floor",
+    )
+    p.add_argument("--config", help="YAML parameter file")
+    p.add_argument(
+        "--sensor-model",
+        choices=("kinect1", "kinect2", "sr4500", "stereo", "pcl", "default"),
+        help="parameter defaults of this sensor model (default: the recording's; PCL's for a .pcd)",
+    )
+    p.add_argument("--preset", choices=("children",), help="parameter preset on top of the model")
+    p.add_argument("--sensor", help="recording: only this sensor (default: all)")
+    p.add_argument("--frames", type=int, help="recording or sensor: stop after this many frames")
+    p.add_argument("--color", help="depth image: registered colour image of the same size")
+    p.add_argument(
+        "--depth-scale",
+        type=float,
+        help="depth image: metres per unit (default 0.001: millimetres)",
+    )
+    add_json(p)

@@ -10,8 +10,9 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
+from typing import Any
 
-from optrack.cli import EXIT_ERROR, EXIT_OK, CommandError, emit_json, info
+from optrack.cli import EXIT_ERROR, EXIT_OK, CommandError, add_json, emit_json, info
 from optrack.errors import UserError
 from optrack.recording import RecordingWriter
 from optrack.sensors.base import Sensor, SensorError
@@ -250,3 +251,29 @@ def _progress(
         sys.stderr.flush()
     elif not final:
         info(line)
+
+
+def add_commands(commands: Any, command: Any) -> None:
+    """Declare this package's commands on the ``optrack`` parser (see optrack/cli.py)."""
+    p = command(
+        "sensors",
+        "List the depth cameras attached to this computer.",
+        "optrack.sensors.cli:cmd_sensors",
+    )
+    p.add_argument(
+        "--udev-rules",
+        action="store_true",
+        help="print the udev rules that let users open the cameras (Linux) and exit",
+    )
+    add_json(p)
+    p = command("record", "Record live sensors into a recording.", "optrack.sensors.cli:cmd_record")
+    p.add_argument(
+        "--sensor",
+        action="append",
+        required=True,
+        metavar="URI",
+        help="sensor URI (repeat for several)",
+    )
+    p.add_argument("--seconds", type=float, required=True, help="how long to record, s")
+    p.add_argument("--out", required=True, help="output recording directory (must be new)")
+    add_json(p)
