@@ -18,7 +18,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from app.display import HEADLESS_HINT, display_problem
+from optrack.runtime.display import HEADLESS_HINT, display_problem
 
 PARENT_ENV = "OPTRACK_PARENT_PID"  # set by 'optrack run' in the processes it starts
 

@@ -17,7 +17,7 @@ VENUE = {"scenario": "mixed", "seed": 0, "venue_seconds": 4.0}
 def site_config(tmp_path_factory):
     """The configuration of a site on its own loopback port (other sites on this computer
     are left alone), its venue rendered beforehand so that timings are the site's start."""
-    from optrack.runtime.site import venue_recording
+    from optrack.runtime.venue import venue_recording
 
     venue_recording(VENUE["scenario"], VENUE["seed"], VENUE["venue_seconds"])
     path = tmp_path_factory.mktemp("site") / "site.yaml"

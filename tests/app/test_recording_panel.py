@@ -19,7 +19,7 @@ from optrack.runtime.calibration_store import CalibrationStore
 from optrack.runtime.config import NODE_PARAMS
 from optrack.runtime.detector_node import DetectorNode
 from optrack.runtime.replay import LiveReplay
-from optrack.runtime.site import venue_recording
+from optrack.runtime.venue import venue_recording
 from optrack.types import DetectionBatch
 
 from .conftest import VENUE, free_port

@@ -8,7 +8,7 @@ import pytest
 
 from app.main_window import MainWindow
 from optrack.recording import Recording
-from optrack.runtime.site import venue_recording
+from optrack.runtime.venue import venue_recording
 
 from .conftest import VENUE
 

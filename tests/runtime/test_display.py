@@ -4,7 +4,7 @@ import os
 import subprocess
 import sys
 
-from app.display import display_problem
+from optrack.runtime.display import display_problem
 
 
 def test_display_problems_are_found_before_qt_starts():

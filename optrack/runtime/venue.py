@@ -1,0 +1,98 @@
+"""The embedded venue: a simulated site rendered once into a recording, then reused.
+
+``optrack run`` without ``site.sensors`` plays this recording through its
+detector nodes as live cameras (live ray casting cannot keep 3 x 30 Hz on a
+2-core computer). The rendering's progress goes to stderr and to a callback
+(the site shows it in its status); the result is cached per scenario, seed,
+length, optrack version and format.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+__all__ = ["VENUE_FORMAT", "VenueProgress", "venue_recording"]
+
+log = logging.getLogger("optrack.runtime.site")
+
+
+def _cache_root() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "optrack" / "venues"
+
+
+#: How the embedded venue is cached: depth (and infrared) as PNG without deflate, colour as
+#: JPEG. Encoding is several times faster than deflated PNG (the rendering's biggest cost
+#: after ray casting), and so is decoding in the detector nodes, where it counts in every
+#: frame's latency; the files are larger (see docs/runtime.md for the measured figures).
+VENUE_FORMAT = {"color_format": "jpg", "jpeg_quality": 95, "png_compression": 0}
+
+#: ``progress(done, total, frames_per_s)`` while a venue renders.
+VenueProgress = Callable[[int, int, float], None]
+
+
+def venue_recording(
+    scenario: str,
+    seed: int,
+    seconds: float,
+    cache: Path | None = None,
+    progress: VenueProgress | None = None,
+) -> Path:
+    """The embedded venue's recording, rendered once (a progress bar on stderr, and
+    ``progress`` called as it goes) and then reused."""
+    from optrack import __version__
+    from optrack.recording import is_recording
+    from optrack.recording.format import RECORDING_PARAMS
+    from optrack.sim.recorder import ProgressBar, write_recording
+    from optrack.sim.world import Simulation
+
+    level = VENUE_FORMAT["png_compression"]
+    name = f"{Path(scenario).stem}-seed{seed}-{seconds:g}s-v{__version__}-png{level}"
+    path = (cache or _cache_root()) / name
+    done = path / ".complete"
+    if done.is_file() and is_recording(path):
+        return path
+    sim = Simulation(scenario, seed=seed, seconds=seconds)
+    total = sum(sim.frame_count(k) for k in range(len(sim.sensors)))
+    log.info(
+        "rendering the venue '%s' once: %d frames, a few minutes on 2 cores (later runs reuse %s)",
+        scenario,
+        total,
+        path,
+    )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    scratch = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=path.parent))
+    bar = ProgressBar(f"venue {sim.scenario.name}", total)
+    started = time.perf_counter()
+
+    def advance(n: int, _total: int) -> None:
+        bar.update(n)
+        if progress is not None:
+            progress(n, total, n / max(time.perf_counter() - started, 1e-9))
+
+    try:
+        write_recording(
+            sim,
+            scratch / "recording",
+            progress=advance,
+            params=RECORDING_PARAMS.create(VENUE_FORMAT),
+        )
+        bar.close()
+        (scratch / "recording" / ".complete").write_text(__version__ + "\n", encoding="utf-8")
+        if path.exists():
+            shutil.rmtree(path)
+        os.replace(scratch / "recording", path)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    log.info(
+        "venue rendered in %.0f s (%.1f frames/s)",
+        time.perf_counter() - started,
+        total / max(time.perf_counter() - started, 1e-9),
+    )
+    return path
