@@ -1,33 +1,16 @@
 """Extrinsic calibration of a camera network with a moving checkerboard (OpenPTrack §4.2).
 
 Live part: as synchronised views of the board arrive, each sensor's view
-gives the board's pose in that camera (PnP). When two sensors see the board
-at once their relative pose follows; a tree grows from the first such pair
-(a sensor joins when it shares a view with a calibrated one, and moves to
-the parent with the better view when one comes along).
+gives the board's pose in that camera and a tree of relative poses grows from
+the views two sensors share (:mod:`optrack.calibration.views`).
 
-Global part: one factor graph (gtsam) over every camera pose and every board
-pose, one reprojection factor per observed corner (eq. 1-2)::
-
-    e_ijk = || pi_i( camera_i_T_world * world_T_board_j * p_k ) - u_ijk ||^2 / sigma_cam^2
-
-with a Huber loss, solved incrementally with iSAM2 while views arrive (the
-live feedback) and by Levenberg-Marquardt over everything at the end.
-
-Boards laid on the floor are constrained to one plane (eq. 3-4): the pose of
-floor board j is the plane's pose composed with a 2D pose (x_j, y_j, theta_j),
-enforced by a tight factor that leaves only those three free. The first floor
-board fixes the world frame: origin on the floor under its first corner, x
-along its rows, z up.
-
-Implementation notes. A corner factor needs two unknown poses (camera and
-board) and a known point, so each one is gtsam_unstable's
-``ProjectionFactorPPP``: it projects a point through ``pose * transform`` with
-``pose = board_T_network`` (the board variable, stored inverted) and
-``transform = network_T_camera``. The board's corner coordinates are the
-"points", shared by all views and held by tight priors. Observed corners are
-undistorted first (OpenCV's full model), so each camera is a plain pinhole in
-the graph and any OpenCV distortion model works. Intrinsics are fixed.
+Global part: one factor graph over every camera pose and every board pose,
+one reprojection factor per observed corner, with the boards laid on the
+floor held in one plane (:mod:`optrack.calibration.factors`, eq. 1-4),
+solved incrementally with iSAM2 while views arrive (the live feedback) and by
+Levenberg-Marquardt over everything at the end. The first floor board fixes
+the world frame: origin on the floor under its first corner, x along its
+rows, z up.
 """
 
 from __future__ import annotations
@@ -37,22 +20,30 @@ import math
 import time
 from collections.abc import Iterable, Mapping
 
-import cv2
 import gtsam
-import gtsam_unstable
 import numpy as np
 
 from optrack.calibration.board import Checkerboard
+from optrack.calibration.factors import FLOOR_FLIP, FLOOR_KEY, FactorGraph, Instant, board_key
+from optrack.calibration.views import (
+    BoardView,
+    CalibrationTree,
+    observe_board,
+    pinhole_residuals_px,
+)
 from optrack.errors import UserError
 from optrack.geometry import invert, make_pose
 from optrack.params import Param, Params, Schema, register
 from optrack.types import Intrinsics
 
 __all__ = [
+    "FLOOR_KEY",
     "NETWORK_PARAMS",
     "BoardView",
+    "CalibrationError",
     "CalibrationTree",
     "Feedback",
+    "Instant",
     "NetworkCalibrator",
     "NetworkResult",
     "SensorStatus",
@@ -152,328 +143,6 @@ NETWORK_PARAMS = register(
 
 class CalibrationError(UserError):
     """A network calibration that cannot be completed."""
-
-
-# ------------------------------------------------------------------ one view
-
-
-@dataclasses.dataclass
-class BoardView:
-    """One sensor's view of the board at one instant.
-
-    ``corners`` are the detected pixels; ``pinhole`` the same corners with the
-    lens distortion removed (pixels of the ideal pinhole camera with the same
-    K); ``camera_T_board`` comes from PnP, with reprojection ``rms_px``.
-    ``quality`` is the board's apparent square size in pixels: bigger means a
-    closer, more frontal board and a better pose.
-    """
-
-    sensor_id: str
-    corners: np.ndarray
-    pinhole: np.ndarray
-    camera_T_board: np.ndarray
-    rms_px: float
-    quality: float
-
-
-def observe_board(
-    sensor_id: str, corners: np.ndarray, intrinsics: Intrinsics, board: Checkerboard
-) -> BoardView:
-    """Board pose in the camera from its corners (OpenCV IPPE, then LM refinement)."""
-    corners = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
-    if len(corners) != board.count:
-        raise ValueError(
-            f"sensor {sensor_id}: expected {board.count} corners of the {board.cols}x{board.rows} "
-            f"board; got {len(corners)}."
-        )
-    objects = board.object_points
-    K, dist = intrinsics.K, intrinsics.dist_coeffs
-    ok, rvec, tvec = cv2.solvePnP(objects, corners, K, dist, flags=cv2.SOLVEPNP_IPPE)
-    if not ok:
-        ok, rvec, tvec = cv2.solvePnP(objects, corners, K, dist)
-    rvec, tvec = cv2.solvePnPRefineLM(objects, corners, K, dist, rvec, tvec)
-    projected, _ = cv2.projectPoints(objects, rvec, tvec, K, dist)
-    rms = float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - corners) ** 2, axis=1))))
-    rotation, _ = cv2.Rodrigues(rvec)
-    pinhole = cv2.undistortPoints(corners.reshape(-1, 1, 2), K, dist, P=K).reshape(-1, 2)
-    outline = corners[[0, board.cols - 1, board.count - 1, board.count - board.cols]]
-    area = 0.5 * abs(
-        float(
-            np.dot(outline[:, 0], np.roll(outline[:, 1], -1))
-            - np.dot(outline[:, 1], np.roll(outline[:, 0], -1))
-        )
-    )
-    quality = math.sqrt(area / ((board.cols - 1) * (board.rows - 1)))
-    return BoardView(
-        sensor_id=sensor_id,
-        corners=corners,
-        pinhole=pinhole,
-        camera_T_board=make_pose(rotation, tvec.reshape(3)),
-        rms_px=rms,
-        quality=quality,
-    )
-
-
-def pinhole_residuals_px(
-    objects: np.ndarray, camera_T_board: np.ndarray, intrinsics: Intrinsics, pinhole: np.ndarray
-) -> np.ndarray:
-    """Distance in pixels between each board point (Nx3, board frame) projected through the
-    ideal pinhole camera of ``intrinsics`` and its undistorted corner (``BoardView.pinhole``)."""
-    points = objects @ camera_T_board[:3, :3].T + camera_T_board[:3, 3]
-    k = intrinsics
-    uv = np.stack(
-        [k.fx * points[:, 0] / points[:, 2] + k.cx, k.fy * points[:, 1] / points[:, 2] + k.cy],
-        axis=1,
-    )
-    return np.linalg.norm(uv - pinhole, axis=1)
-
-
-# ----------------------------------------------------------------- the tree
-
-
-class CalibrationTree:
-    """Which sensor is placed relative to which (the live calibration's spanning tree).
-
-    Each sensor but the root has a parent and the relative pose
-    ``parent_T_child`` from the best shared view so far (link quality: the
-    smaller of the two views' qualities).
-    """
-
-    def __init__(self) -> None:
-        self.root: str | None = None
-        self.parent: dict[str, str] = {}
-        self.link_quality: dict[str, float] = {}
-        self.parent_T_child: dict[str, np.ndarray] = {}
-
-    def calibrated(self, sensor: str) -> bool:
-        return sensor == self.root or sensor in self.parent
-
-    @property
-    def sensors(self) -> list[str]:
-        return ([self.root] if self.root is not None else []) + list(self.parent)
-
-    def _ancestors(self, sensor: str) -> set[str]:
-        seen = set()
-        while sensor in self.parent:
-            sensor = self.parent[sensor]
-            seen.add(sensor)
-        return seen
-
-    def offer(self, views: Mapping[str, BoardView], root: str | None = None) -> list[str]:
-        """Use one instant's views (two or more sensors) to add or re-parent sensors.
-
-        Returns the sensors that joined the tree.
-        """
-        if len(views) < 2:
-            return []
-        joined: list[str] = []
-        if self.root is None:
-            self.root = root if root in views else sorted(views)[0]
-            joined.append(self.root)
-        changed = True
-        while changed:  # a sensor that joins can be the parent of another in the same view
-            changed = False
-            for child in sorted(views):
-                if child == self.root:
-                    continue
-                best: tuple[float, str] | None = None
-                for candidate in views:
-                    if candidate == child or not self.calibrated(candidate):
-                        continue
-                    if child in self._ancestors(candidate):
-                        continue  # re-parenting under a descendant would make a loop
-                    quality = min(views[child].quality, views[candidate].quality)
-                    if best is None or quality > best[0]:
-                        best = (quality, candidate)
-                if best is None:
-                    continue
-                quality, parent = best
-                if self.calibrated(child) and quality <= self.link_quality[child]:
-                    continue
-                was = self.calibrated(child)
-                self.parent[child] = parent
-                self.link_quality[child] = quality
-                self.parent_T_child[child] = views[parent].camera_T_board @ invert(
-                    views[child].camera_T_board
-                )
-                if not was:
-                    joined.append(child)
-                    changed = True
-        return joined
-
-    def root_T(self, sensor: str) -> np.ndarray:
-        """Pose of a sensor in the root camera's frame, chained along the tree."""
-        pose = np.eye(4)
-        while sensor != self.root:
-            pose = self.parent_T_child[sensor] @ pose
-            sensor = self.parent[sensor]
-        return pose
-
-
-# ------------------------------------------------------------- the solver
-
-
-def _camera_key(index: int) -> int:
-    return gtsam.symbol("c", index)
-
-
-def _board_key(index: int) -> int:
-    return gtsam.symbol("b", index)
-
-
-def _corner_key(index: int) -> int:
-    return gtsam.symbol("l", index)
-
-
-FLOOR_KEY = gtsam.symbol("f", 0)
-
-
-def _numerical_jacobians(
-    residual, poses: list[gtsam.Pose3], step: float = 1e-6
-) -> list[np.ndarray]:
-    """Central-difference Jacobians of ``residual(*poses)`` in each pose's tangent space."""
-    jacobians = []
-    for i, pose in enumerate(poses):
-        columns = []
-        for d in range(6):
-            delta = np.zeros(6)
-            delta[d] = step
-            plus = list(poses)
-            minus = list(poses)
-            plus[i] = pose.retract(delta)
-            minus[i] = pose.retract(-delta)
-            columns.append((residual(*plus) - residual(*minus)) / (2 * step))
-        jacobians.append(np.stack(columns, axis=1))
-    return jacobians
-
-
-# The canonical floor board: its z axis points into the floor, its face is
-# ``thickness`` above it (board frame: x along rows, y along columns, z away
-# from the viewer).
-_FLIP = np.diag([1.0, -1.0, -1.0])
-
-
-def _floor_T_board_residual(thickness: float, anchor: bool):
-    """Residual of eq. 3-4 for one floor board, given floor_T_network and board_T_network.
-
-    ``floor_T_board`` must be a turn about the vertical and a shift in the
-    floor plane: its z axis (0, 0, -1) and its height ``thickness``. For the
-    anchor board (the first on the floor) the whole pose is fixed.
-    """
-    target = gtsam.Pose3(gtsam.Rot3(_FLIP), np.array([0.0, 0.0, thickness]))
-
-    def residual(floor: gtsam.Pose3, board: gtsam.Pose3) -> np.ndarray:
-        floor_T_board = floor.compose(board.inverse())
-        if anchor:
-            return target.localCoordinates(floor_T_board)
-        rotation = floor_T_board.rotation().matrix()
-        return np.array(
-            [rotation[0, 2], rotation[1, 2], floor_T_board.translation()[2] - thickness]
-        )
-
-    return residual
-
-
-def _floor_factor(
-    board_key: int, thickness: float, anchor: bool, sigma: float
-) -> gtsam.CustomFactor:
-    residual = _floor_T_board_residual(thickness, anchor)
-
-    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None):
-        floor = values.atPose3(FLOOR_KEY)
-        board = values.atPose3(board_key)
-        if H is not None:
-            H[0], H[1] = _numerical_jacobians(residual, [floor, board])
-        return residual(floor, board)
-
-    noise = gtsam.noiseModel.Isotropic.Sigma(6 if anchor else 3, sigma)
-    return gtsam.CustomFactor(noise, [FLOOR_KEY, board_key], error)
-
-
-@dataclasses.dataclass
-class Instant:
-    """The views of one instant; ``added``: sensors whose corners are in the graph."""
-
-    index: int
-    views: dict[str, BoardView]
-    floor: bool
-    added: set[str] = dataclasses.field(default_factory=set)
-
-    @property
-    def in_graph(self) -> bool:
-        return bool(self.added)
-
-
-class _Graph:
-    """Builds the factors and initial values; solves incrementally (iSAM2) or in batch."""
-
-    def __init__(
-        self,
-        board: Checkerboard,
-        intrinsics: Mapping[str, Intrinsics],
-        params: Params,
-    ) -> None:
-        self.board = board
-        self.params = params
-        self.calibrations = {
-            sid: gtsam.Cal3_S2(k.fx, k.fy, 0.0, k.cx, k.cy) for sid, k in intrinsics.items()
-        }
-        self.camera_index = {sid: i for i, sid in enumerate(sorted(intrinsics))}
-        sigma = float(params.sigma_px)
-        self.noise = gtsam.noiseModel.Robust.Create(
-            gtsam.noiseModel.mEstimator.Huber.Create(float(params.huber_px) / sigma),
-            gtsam.noiseModel.Isotropic.Sigma(2, sigma),
-        )
-        self.corner_noise = gtsam.noiseModel.Isotropic.Sigma(3, 1e-9)
-        self.root_noise = gtsam.noiseModel.Isotropic.Sigma(6, 1e-9)
-
-    def base(
-        self, root: str, fixed: Mapping[str, np.ndarray] | None = None
-    ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
-        """Corner points (fixed) and the gauge: the root camera at the network origin (and
-        cameras whose ``network_T_camera`` is ``fixed`` held there)."""
-        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        for k, point in enumerate(self.board.object_points):
-            graph.add(gtsam.PriorFactorPoint3(_corner_key(k), point, self.corner_noise))
-            values.insert(_corner_key(k), point)
-        graph.add(gtsam.PriorFactorPose3(self.camera_key(root), gtsam.Pose3(), self.root_noise))
-        for sid, pose in (fixed or {}).items():
-            if sid != root:
-                graph.add(
-                    gtsam.PriorFactorPose3(self.camera_key(sid), gtsam.Pose3(pose), self.root_noise)
-                )
-        return graph, values
-
-    def camera_key(self, sensor: str) -> int:
-        return _camera_key(self.camera_index[sensor])
-
-    def instant_factors(
-        self, instant: Instant, sensors: Iterable[str], *, floor: bool, anchor: bool
-    ) -> gtsam.NonlinearFactorGraph:
-        """One reprojection factor per corner of each of ``sensors``' views (eq. 1-2), and
-        with ``floor`` the board's floor constraint (eq. 3-4)."""
-        graph = gtsam.NonlinearFactorGraph()
-        board_key = _board_key(instant.index)
-        for sid in sensors:
-            view = instant.views[sid]
-            camera_key = self.camera_key(sid)
-            calibration = self.calibrations[sid]
-            for k, uv in enumerate(view.pinhole):
-                graph.add(
-                    gtsam_unstable.ProjectionFactorPPPCal3_S2(
-                        uv, self.noise, board_key, camera_key, _corner_key(k), calibration
-                    )
-                )
-        if floor:
-            graph.add(
-                _floor_factor(
-                    board_key,
-                    float(self.params.board_thickness),
-                    anchor,
-                    float(self.params.floor_sigma),
-                )
-            )
-        return graph
 
 
 # --------------------------------------------------------------- feedback
@@ -579,7 +248,7 @@ class NetworkCalibrator:
         self.instants: list[Instant] = []
         self.status = {sid: SensorStatus() for sid in sorted(self.intrinsics)}
         self.covisibility: dict[tuple[str, str], int] = {}
-        self.graph = _Graph(board, self.intrinsics, self.params)
+        self.graph = FactorGraph(board, self.intrinsics, self.params)
         self.isam: gtsam.ISAM2 | None = None
         self.estimate: gtsam.Values | None = None
         self.floor_anchor: int | None = None
@@ -700,7 +369,7 @@ class NetworkCalibrator:
         existing: gtsam.Values | None,
         anchor: bool,
     ) -> None:
-        key = _board_key(instant.index)
+        key = board_key(instant.index)
         new_board = not instant.added
         anchor = anchor and new_board
         if new_board:
@@ -714,7 +383,9 @@ class NetworkCalibrator:
                 if existing is not None and existing.exists(FLOOR_KEY):
                     values.insert(FLOOR_KEY, existing.atPose3(FLOOR_KEY))
                 else:
-                    floor_T_board = make_pose(_FLIP, (0.0, 0.0, float(self.params.board_thickness)))
+                    floor_T_board = make_pose(
+                        FLOOR_FLIP, (0.0, 0.0, float(self.params.board_thickness))
+                    )
                     values.insert(FLOOR_KEY, gtsam.Pose3(floor_T_board @ board_T_network.matrix()))
         graph.push_back(
             self.graph.instant_factors(
@@ -759,7 +430,7 @@ class NetworkCalibrator:
             if values.exists(self.graph.camera_key(sid))
         }
         for instant in self.instants:
-            key = _board_key(instant.index)
+            key = board_key(instant.index)
             if not instant.added or not values.exists(key):
                 continue
             board_T_network = values.atPose3(key).matrix()
@@ -845,7 +516,7 @@ class NetworkCalibrator:
             world_T_network = np.eye(4)
             world = f"camera:{self.tree.root}"
         boards = {
-            i.index: world_T_network @ invert(result.atPose3(_board_key(i.index)).matrix())
+            i.index: world_T_network @ invert(result.atPose3(board_key(i.index)).matrix())
             for i in self.instants
             if i.in_graph
         }
