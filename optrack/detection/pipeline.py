@@ -23,6 +23,7 @@ import dataclasses
 import math
 import time
 from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -77,6 +78,15 @@ def _transform_xyz(
 def _transform(a_T_b: np.ndarray, points: np.ndarray) -> np.ndarray:
     """``a_T_b`` applied to ...x3 points (see :func:`_transform_xyz`)."""
     return np.stack(_transform_xyz(a_T_b, points[..., 0], points[..., 1], points[..., 2]), axis=-1)
+
+
+class _Crop(NamedTuple):
+    """A candidate's strided window: camera and ground coordinates, valid and own pixels."""
+
+    camera: tuple[np.ndarray, ...]
+    ground: tuple[np.ndarray, ...]
+    valid: np.ndarray
+    mask: np.ndarray
 
 
 @dataclasses.dataclass
@@ -175,8 +185,6 @@ class PeopleDetector:
         confidence: np.ndarray | None = None,
     ) -> DetectionBatch:
         started = time.perf_counter()
-        p = self.params
-        s = int(p.sampling_factor)
         self.last_judgements = []
         frame_id = "world" if self.world_T_camera is not None else "ground"
 
@@ -192,60 +200,13 @@ class PeopleDetector:
                 processing_ms=(time.perf_counter() - started) * 1000.0,
             )
 
-        top = float(p.max_height) + float(p.cluster_tolerance) * float(p.voxel_size)
-        floor_distance = float(p.ground_inlier_distance)
-        if p.apply_denoising or not self.ground.ready:
-            points, sampled = select_points(
-                cloud, s, float(p.max_distance), confidence, float(p.confidence_threshold)
-            )
-            if p.apply_denoising:
-                points = denoise(points, int(p.mean_k_denoising), float(p.std_dev_denoising))
-            if not self.ground.ready:
-                voxels = voxel_grid(points, float(p.voxel_size))
-                if not self.ground.initialise(voxels, len(points) / max(sampled, 1)):
-                    return batch([])
-            # Floor removal before the voxel grid (the same points go as after it, and
-            # the floor, most of a frame, is not voxelised), and the floor refit on them.
-            heights = self.ground.update(points)
-            above = (heights > floor_distance) & (heights < top)
-            points = np.compress(above, points, axis=0)
-        else:  # the same in one pass over the depth image, before making points
-            assert self.ground.plane is not None
-            points, floor, count = split_at_floor(
-                cloud,
-                s,
-                float(p.max_distance),
-                self.ground.plane.coefficients,
-                floor_distance,
-                top,
-                FIT_POINTS,
-                confidence,
-                float(p.confidence_threshold),
-            )
-            self.ground.refit(floor, count)
+        points = self._above_floor(cloud, confidence)
+        if points is None:
+            return batch([])
         plane = self.ground.plane
         assert plane is not None
         g_T_c = ground_T_camera(plane)
-        voxel = float(p.voxel_size)
-        if p.background_subtraction:  # PCL's order: the background goes before the walls
-            foreground = voxel_grid(points, voxel)
-            if self.background.learning and self.background.learn(foreground, stamp):
-                pass  # still learning: this frame is detected without subtraction
-            else:
-                foreground = foreground[self.background.foreground(foreground)]
-            candidates = person_candidates(_transform(g_T_c, foreground), p)
-        else:
-            # Walls and cupboards (tall columns, most of the points) are found on the
-            # points and left out before the voxel grid, not voxelised and then dropped.
-            columns = TallColumns(
-                *_transform_xyz(g_T_c.astype(np.float32), points[:, 0], points[:, 1], points[:, 2]),
-                voxel,
-                float(p.max_height),
-                float(p.cluster_tolerance) * voxel,
-            )
-            foreground = voxel_grid(np.compress(~columns.in_tall, points, axis=0), voxel)
-            voxels = _transform(g_T_c, foreground)
-            candidates = person_candidates(voxels, p, touching=columns.near(voxels))
+        candidates = self._candidates(points, g_T_c, stamp)
         if not candidates:
             return batch([])
 
@@ -270,6 +231,69 @@ class PeopleDetector:
             if judgement.accepted:
                 out.append(judgement.detection)
         return batch(out)
+
+    def _above_floor(
+        self, cloud: OrganisedCloud, confidence: np.ndarray | None
+    ) -> np.ndarray | None:
+        """The points between the floor and a person's top (camera frame), the floor
+        refit on the way; None while the floor is not yet known."""
+        p = self.params
+        s = int(p.sampling_factor)
+        top = float(p.max_height) + float(p.cluster_tolerance) * float(p.voxel_size)
+        floor_distance = float(p.ground_inlier_distance)
+        if p.apply_denoising or not self.ground.ready:
+            points, sampled = select_points(
+                cloud, s, float(p.max_distance), confidence, float(p.confidence_threshold)
+            )
+            if p.apply_denoising:
+                points = denoise(points, int(p.mean_k_denoising), float(p.std_dev_denoising))
+            if not self.ground.ready:
+                voxels = voxel_grid(points, float(p.voxel_size))
+                if not self.ground.initialise(voxels, len(points) / max(sampled, 1)):
+                    return None
+            # Floor removal before the voxel grid (the same points go as after it, and
+            # the floor, most of a frame, is not voxelised), and the floor refit on them.
+            heights = self.ground.update(points)
+            above = (heights > floor_distance) & (heights < top)
+            return np.compress(above, points, axis=0)
+        # the same in one pass over the depth image, before making points
+        assert self.ground.plane is not None
+        points, floor, count = split_at_floor(
+            cloud,
+            s,
+            float(p.max_distance),
+            self.ground.plane.coefficients,
+            floor_distance,
+            top,
+            FIT_POINTS,
+            confidence,
+            float(p.confidence_threshold),
+        )
+        self.ground.refit(floor, count)
+        return points
+
+    def _candidates(self, points: np.ndarray, g_T_c: np.ndarray, stamp: float) -> list[Candidate]:
+        """People candidates among the points above the floor (ground frame voxels)."""
+        p = self.params
+        voxel = float(p.voxel_size)
+        if p.background_subtraction:  # PCL's order: the background goes before the walls
+            foreground = voxel_grid(points, voxel)
+            if self.background.learning and self.background.learn(foreground, stamp):
+                pass  # still learning: this frame is detected without subtraction
+            else:
+                foreground = foreground[self.background.foreground(foreground)]
+            return person_candidates(_transform(g_T_c, foreground), p)
+        # Walls and cupboards (tall columns, most of the points) are found on the
+        # points and left out before the voxel grid, not voxelised and then dropped.
+        columns = TallColumns(
+            *_transform_xyz(g_T_c.astype(np.float32), points[:, 0], points[:, 1], points[:, 2]),
+            voxel,
+            float(p.max_height),
+            float(p.cluster_tolerance) * voxel,
+        )
+        foreground = voxel_grid(np.compress(~columns.in_tall, points, axis=0), voxel)
+        voxels = _transform(g_T_c, foreground)
+        return person_candidates(voxels, p, touching=columns.near(voxels))
 
     def _hog_image(
         self,
@@ -308,48 +332,24 @@ class PeopleDetector:
         p = self.params
         plane = self.ground.plane
         assert plane is not None
-        hx, hy = float(candidate.head[0]), float(candidate.head[1])
         height = candidate.height
         # Head top, floor and centre on the person's axis, camera frame.
         up_c = c_T_g[:3, 2]
+        hx, hy = float(candidate.head[0]), float(candidate.head[1])
         bottom_c = c_T_g[:3, 0] * hx + c_T_g[:3, 1] * hy + c_T_g[:3, 3]
         top_c, center_c = bottom_c + up_c * height, bottom_c + up_c * (height / 2.0)
         pixels, _ = project(np.stack([top_c, bottom_c, center_c]), cloud.intrinsics)
         fill = float(p.hog_window_fill)
         to_depth = level_window(center_c, height, plane.normal, cloud.intrinsics.K, fill)
-
-        rows_img, cols_img = cloud.shape
         person_px = abs(float(pixels[1][1] - pixels[0][1]))
         stride = max(1, round(person_px / fill / CROP_ROWS))
-        u0, v0, u1, v1 = window_footprint(to_depth, cloud.shape)
-
-        def candidate_pixels() -> tuple[
-            tuple[np.ndarray, ...], tuple[np.ndarray, ...], np.ndarray, np.ndarray
-        ]:
-            """A strided crop of the window (x, y, z in the camera and in the ground
-            frame), its valid pixels, and the candidate's own: near its axis, above the
-            floor, below its head."""
-            if u1 > u0 and v1 > v0:
-                crop_c = cloud.components(slice(v0, v1, stride), slice(u0, u1, stride))
-                crop_g = _transform_xyz(g_T_c, *crop_c)
-            else:
-                crop_c = crop_g = tuple(np.full((0, 0), np.nan) for _ in range(3))
-            gx, gy, gz = crop_g
-            valid = np.isfinite(gz)
-            with np.errstate(invalid="ignore"):
-                mask = (
-                    valid
-                    & (np.hypot(gx - hx, gy - hy) < float(p.person_radius))
-                    & (gz > float(p.ground_inlier_distance))
-                    & (gz < height + float(p.voxel_size))
-                )
-            return crop_c, crop_g, valid, mask
+        footprint = window_footprint(to_depth, cloud.shape)
 
         crop = None
         if source == "depth":
-            crop = candidate_pixels()
-            silhouette = (crop[3] * np.uint8(255)).astype(np.uint8)
-            window = person_window(silhouette, to_depth, (u0, v0), stride)
+            crop = self._crop(candidate, cloud, g_T_c, footprint, stride)
+            silhouette = (crop.mask * np.uint8(255)).astype(np.uint8)
+            window = person_window(silhouette, to_depth, footprint[:2], stride)
             score = self.hog.score(window)
             accepted = score > float(p.min_depth_confidence)
         else:
@@ -363,59 +363,120 @@ class PeopleDetector:
             accepted = score > float(p.min_confidence)
 
         # Flags and histogram, of accepted candidates only (the others are not output).
-        out_of_view = self._outside_fraction(pixels, person_px, (rows_img, cols_img)) > float(
+        out_of_view = self._outside_fraction(pixels, person_px, cloud.shape) > float(
             p.out_of_view_fraction
         )
         occluded = False
         histogram: list[float] = []
         if accepted:
-            crop_c, crop_g, valid, mask = crop if crop is not None else candidate_pixels()
+            crop = (
+                crop if crop is not None else self._crop(candidate, cloud, g_T_c, footprint, stride)
+            )
             occluded = self._occluded(
-                crop_g,
-                valid,
+                crop.ground,
+                crop.valid,
                 (hx, hy),
                 pixels,
-                (u0, v0),
+                footprint[:2],
                 stride,
                 cloud.intrinsics,
                 float(center_c[2]),
             )
-            if color is not None and np.any(mask):
-                if color_intrinsics is cloud.intrinsics:  # registered: the same pixels
-                    person_colors = color[v0:v1:stride, u0:u1:stride][mask]
-                else:
-                    uv, _ = project(np.stack([c[mask] for c in crop_c], axis=1), color_intrinsics)
-                    u = np.rint(uv[:, 0]).astype(np.int64)
-                    v = np.rint(uv[:, 1]).astype(np.int64)
-                    inside = (u >= 0) & (u < color.shape[1]) & (v >= 0) & (v < color.shape[0])
-                    person_colors = color[v[inside], u[inside]]
-                histogram = hsv_histogram(
-                    person_colors, int(p.histogram_hue_bins), int(p.histogram_saturation_bins)
-                )
-        box_h = person_px * float(p.box_enlarge_factor)
+            histogram = self._histogram(crop, color, color_intrinsics, cloud, footprint, stride)
+        detection = Detection(
+            height=float(height),
+            confidence=score,
+            box=self._box(pixels, person_px, cloud.shape),
+            occluded=bool(occluded),
+            out_of_view=bool(out_of_view),
+            histogram=histogram,
+            **self._position(center_c, g_T_c),
+        )
+        return Judgement(candidate, score, source, accepted, detection)
+
+    def _crop(
+        self,
+        candidate: Candidate,
+        cloud: OrganisedCloud,
+        g_T_c: np.ndarray,
+        footprint: tuple[int, int, int, int],
+        stride: int,
+    ) -> _Crop:
+        """A strided crop of the window (x, y, z in the camera and in the ground frame),
+        its valid pixels, and the candidate's own: near its axis, above the floor,
+        below its head."""
+        p = self.params
+        u0, v0, u1, v1 = footprint
+        if u1 > u0 and v1 > v0:
+            crop_c = cloud.components(slice(v0, v1, stride), slice(u0, u1, stride))
+            crop_g = _transform_xyz(g_T_c, *crop_c)
+        else:
+            crop_c = crop_g = tuple(np.full((0, 0), np.nan) for _ in range(3))
+        gx, gy, gz = crop_g
+        hx, hy = float(candidate.head[0]), float(candidate.head[1])
+        valid = np.isfinite(gz)
+        with np.errstate(invalid="ignore"):
+            mask = (
+                valid
+                & (np.hypot(gx - hx, gy - hy) < float(p.person_radius))
+                & (gz > float(p.ground_inlier_distance))
+                & (gz < candidate.height + float(p.voxel_size))
+            )
+        return _Crop(crop_c, crop_g, valid, mask)
+
+    def _histogram(
+        self,
+        crop: _Crop,
+        color: np.ndarray | None,
+        color_intrinsics: Intrinsics,
+        cloud: OrganisedCloud,
+        footprint: tuple[int, int, int, int],
+        stride: int,
+    ) -> list[float]:
+        """The person's colour histogram (HSV), from the crop's person pixels."""
+        if color is None or not np.any(crop.mask):
+            return []
+        u0, v0, u1, v1 = footprint
+        if color_intrinsics is cloud.intrinsics:  # registered: the same pixels
+            person_colors = color[v0:v1:stride, u0:u1:stride][crop.mask]
+        else:
+            uv, _ = project(np.stack([c[crop.mask] for c in crop.camera], axis=1), color_intrinsics)
+            u = np.rint(uv[:, 0]).astype(np.int64)
+            v = np.rint(uv[:, 1]).astype(np.int64)
+            inside = (u >= 0) & (u < color.shape[1]) & (v >= 0) & (v < color.shape[0])
+            person_colors = color[v[inside], u[inside]]
+        p = self.params
+        return hsv_histogram(
+            person_colors, int(p.histogram_hue_bins), int(p.histogram_saturation_bins)
+        )
+
+    def _box(
+        self, pixels: np.ndarray, person_px: float, shape: tuple[int, int]
+    ) -> tuple[int, int, int, int]:
+        """The person's image box (x, y, width, height), enlarged as OpenPTrack's."""
+        rows, cols = shape
+        box_h = person_px * float(self.params.box_enlarge_factor)
         box_w = box_h / 2.0
         bx0 = max(0, int(pixels[2][0] - box_w / 2.0))
         by0 = max(0, int(pixels[2][1] - box_h / 2.0))
-        bx1 = min(cols_img, int(pixels[2][0] + box_w / 2.0))
-        by1 = min(rows_img, int(pixels[2][1] + box_h / 2.0))
-        compensation = float(p.centroid_depth_compensation)
+        bx1 = min(cols, int(pixels[2][0] + box_w / 2.0))
+        by1 = min(rows, int(pixels[2][1] + box_h / 2.0))
+        return (bx0, by0, max(bx1 - bx0, 0), max(by1 - by0, 0))
+
+    def _position(self, center_c: np.ndarray, g_T_c: np.ndarray) -> dict[str, Any]:
+        """The detection's position (world, or ground frame) and its camera-frame point,
+        pushed back by the centroid depth compensation."""
+        compensation = float(self.params.centroid_depth_compensation)
         cx, cy, cz = (float(v) for v in center_c)
         camera_xyz = center_c * (1.0 + compensation / math.sqrt(cx * cx + cy * cy + cz * cz))
         pose = self.world_T_camera if self.world_T_camera is not None else g_T_c
         position = pose[:3, :3] @ camera_xyz + pose[:3, 3]
-        detection = Detection(
-            x=float(position[0]),
-            y=float(position[1]),
-            z=float(position[2]),
-            height=float(height),
-            confidence=score,
-            box=(bx0, by0, max(bx1 - bx0, 0), max(by1 - by0, 0)),
-            camera_xyz=(float(camera_xyz[0]), float(camera_xyz[1]), float(camera_xyz[2])),
-            occluded=bool(occluded),
-            out_of_view=bool(out_of_view),
-            histogram=histogram,
-        )
-        return Judgement(candidate, score, source, accepted, detection)
+        return {
+            "x": float(position[0]),
+            "y": float(position[1]),
+            "z": float(position[2]),
+            "camera_xyz": (float(camera_xyz[0]), float(camera_xyz[1]), float(camera_xyz[2])),
+        }
 
     @staticmethod
     def _outside_fraction(pixels: np.ndarray, person_px: float, shape: tuple[int, int]) -> float:
