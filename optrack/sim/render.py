@@ -23,7 +23,7 @@ import open3d as o3d
 
 from optrack.geometry import invert, transform_points
 from optrack.params import Param, Params, Schema, register
-from optrack.sim.board import Checkerboard
+from optrack.sim.board import PhysicalBoard
 from optrack.sim.materials import MaterialTable, cell_noise
 from optrack.sim.scenario import Lighting
 from optrack.sim.venue import Venue
@@ -118,7 +118,7 @@ class DynamicGeometry:
     materials: MaterialTable
     boxes: np.ndarray
     hulls: list[np.ndarray]
-    board: Checkerboard | None = None
+    board: PhysicalBoard | None = None
     world_T_board: np.ndarray | None = None
     _scene: o3d.t.geometry.RaycastingScene | None = None
 

@@ -18,7 +18,9 @@ import open3d as o3d
 from optrack.geometry import invert, make_pose, transform_points
 from optrack.params import Param, Params, Schema, register
 from optrack.recording.format import BoardTruth, GroundTruth, PersonTruth, SensorInfo
-from optrack.sim.board import BOARD_PARAMS, Checkerboard, Operator, SensorView, plan_board_steps
+from optrack.sim.board import BOARD_PARAMS, PhysicalBoard
+from optrack.sim.board_operator import Operator
+from optrack.sim.board_plan import SensorView, plan_board_steps
 from optrack.sim.body import (
     BODY_PARAMS,
     HEAD_RADII,
@@ -189,7 +191,7 @@ class Simulation:
         self.seconds = float(seconds if seconds is not None else self.scenario.seconds)
         low, high = self.scenario.people_count_range()
         count = people if people is not None else int(crowd_rng.integers(low, high + 1))
-        self.board: Checkerboard | None = None
+        self.board: PhysicalBoard | None = None
         self.operator: Operator | None = None
         if self.scenario.board is not None:
             self._add_operator(params.get("sim_board") or BOARD_PARAMS.create(), seconds)
@@ -280,7 +282,7 @@ class Simulation:
     def _add_operator(self, board_params: Params, seconds: float | None) -> None:
         spec = self.scenario.board
         assert spec is not None
-        self.board = Checkerboard(spec, board_params)
+        self.board = PhysicalBoard.from_spec(spec, board_params)
         views = [
             SensorView(s.world_T_camera, s.model.intrinsics, s.model.min_range, s.model.max_range)
             for s in self.sensors
@@ -522,9 +524,9 @@ class Simulation:
             boards.append(
                 BoardTruth(
                     world_T_board=matrix,  # type: ignore[arg-type]
-                    cols=self.board.cols,
-                    rows=self.board.rows,
-                    square=self.board.square,
+                    cols=self.board.pattern.cols,
+                    rows=self.board.pattern.rows,
+                    square=self.board.pattern.square,
                     on_floor=state.board_on_floor,
                 )
             )

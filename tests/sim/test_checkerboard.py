@@ -9,7 +9,7 @@ import pytest
 
 from optrack.geometry import invert, project, transform_points
 from optrack.sim import Simulation
-from optrack.sim.board import neighbouring_pairs
+from optrack.sim.board_plan import neighbouring_pairs
 
 CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.001)
 
@@ -32,7 +32,9 @@ def _detected_vs_true(sim: Simulation, index: int, t: float, stream: str) -> np.
     corners = cv2.cornerSubPix(image, corners, (3, 3), (-1, -1), CRITERIA).reshape(-1, 2)
     sensor = sim.sensors[index]
     camera_T_board = invert(sensor.world_T_camera) @ np.array(board.world_T_board)
-    truth, _ = project(transform_points(camera_T_board, sim.board.corners), sensor.model.intrinsics)
+    truth, _ = project(
+        transform_points(camera_T_board, sim.board.pattern.object_points), sensor.model.intrinsics
+    )
     assert len(corners) == board.cols * board.rows
     return np.linalg.norm(corners[:, None, :] - truth[None], axis=2).min(axis=1)
 
@@ -144,7 +146,7 @@ def test_the_sr4500_finds_the_board_on_its_upsampled_infrared_image():
     sensor = sim.sensors[sr]
     camera_T_board = invert(sensor.world_T_camera) @ np.array(truth.world_T_board)
     true_px, _ = project(
-        transform_points(camera_T_board, sim.board.corners), sensor.model.intrinsics
+        transform_points(camera_T_board, sim.board.pattern.object_points), sensor.model.intrinsics
     )
     assert np.sqrt(np.mean(np.sum((corners - true_px) ** 2, axis=1))) < 0.3
 
@@ -165,7 +167,7 @@ def test_the_operator_stands_still_while_holding_the_board_near_a_wall():
 
 
 def _view(sensor):
-    from optrack.sim.board import SensorView
+    from optrack.sim.board_plan import SensorView
 
     model = sensor.model
     return SensorView(sensor.world_T_camera, model.intrinsics, model.min_range, model.max_range)
