@@ -26,18 +26,12 @@ then destroys them and closes the device.
 
 from __future__ import annotations
 
-import atexit
 import collections
 import ctypes
 import logging
 import math
-import os
 import re
-import sysconfig
-import threading
 import time
-import weakref
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -46,6 +40,20 @@ from optrack.params import Param, Params, Schema, register
 from optrack.recording.format import SensorInfo
 from optrack.sensors.base import SensorError, stream_mode_params
 from optrack.sensors.live import DeviceLost, LiveSensor, Mode, live_params, nearest_mode
+from optrack.sensors.openni_library import (
+    DUMMY,
+    Library,
+    attached_devices,
+    error_text,
+    initialize,
+    intrinsics_from_fov,
+    modules,
+    open_failure,
+    resolve_uri,
+    serial_of,
+    stream_fov,
+    text,
+)
 from optrack.types import Intrinsics, RGBDFrame
 
 __all__ = [
@@ -96,177 +104,6 @@ OPENNI_PARAMS = register(
 #: PS1080 data sheet (Kinect v1, Xtion, Carmine); used only when the driver
 #: reports none (the Dummy device).
 NOMINAL_FOV_DEG = (58.0, 45.0)
-
-DUMMY = "Dummy"
-_USB_PATH = re.compile(r"^([0-9a-fA-F]{4})/([0-9a-fA-F]{4})@(\d+)/(\d+)$")
-_SERIAL_BYTES = 64
-
-
-# ------------------------------------------------------------- the library
-
-
-class _Library:
-    """The OpenNI2 library, initialised once per process."""
-
-    lock = threading.Lock()
-    initialized = False
-    sensors: weakref.WeakSet[OpenNISensor] = weakref.WeakSet()
-
-
-def _modules() -> tuple[Any, Any]:
-    try:
-        from openni import _openni2 as c_api
-        from openni import openni2
-    except ImportError:
-        raise SensorError(
-            "openni:// needs the openni Python package; install it with "
-            "'.venv/bin/pip install openni'."
-        ) from None
-    return openni2, c_api
-
-
-def _library_dirs(configured: str) -> list[Path]:
-    if configured:
-        return [Path(configured)]
-    dirs = [os.environ.get("OPENNI2_REDIST64", ""), os.environ.get("OPENNI2_REDIST", "")]
-    multiarch = sysconfig.get_config_var("MULTIARCH") or ""
-    if multiarch:
-        dirs.append(f"/usr/lib/{multiarch}")
-    dirs += ["/usr/lib", "/usr/local/lib", "/usr/lib64", "/lib"]
-    return [Path(d) for d in dirs if d]
-
-
-def _initialize(configured_dir: str = "") -> Any:
-    """Load and initialise OpenNI2 (once); return the ``openni2`` module."""
-    openni2, c_api = _modules()
-    with _Library.lock:
-        if _Library.initialized and openni2.is_initialized():
-            return openni2
-        dirs = _library_dirs(configured_dir)
-        found = next((d for d in dirs if (d / "libOpenNI2.so").is_file()), None)
-        if found is None:
-            # Only the runtime package (libOpenNI2.so.0, no -dev symlink): load it by name.
-            versioned = next((d for d in dirs if (d / "libOpenNI2.so.0").is_file()), None)
-            if versioned is None:
-                searched = ", ".join(str(d) for d in dirs)
-                raise SensorError(
-                    f"OpenNI2 is not installed (no libOpenNI2.so in {searched}); install the "
-                    "Debian packages libopenni2-0 and libopenni2-dev, or set openni.library_dir."
-                )
-            if not openni2.loaded_dll_directory:
-                c_api.load_dll(str(versioned / "libOpenNI2.so.0"))
-                openni2.loaded_dll_directory = str(versioned)
-            found = versioned
-        try:
-            openni2.initialize(str(found))
-        except Exception as error:  # the binding raises bare Exceptions
-            raise SensorError(
-                f"OpenNI2 in {found} could not be initialised ({error}); reinstall libopenni2-0."
-            ) from None
-        if not _Library.initialized:
-            atexit.unregister(openni2.unload)
-            atexit.register(_shutdown)
-        _Library.initialized = True
-        return openni2
-
-
-def _shutdown() -> None:
-    """Exit hook: close our sensors gracefully (stop, wait, destroy, close).
-
-    OpenNI2 itself is left to the process exit: with every device closed
-    ``oniShutdown`` has nothing to release, and Debian's crashes now and then
-    after the Dummy device streamed.
-    """
-    for sensor in list(_Library.sensors):
-        try:
-            sensor.close()
-        except Exception as error:  # exiting: report, go on
-            log.warning("closing %s at exit failed: %s", sensor.describe(), error)
-
-
-def _text(value: bytes | str) -> str:
-    if isinstance(value, bytes):
-        return value.decode("utf-8", "replace").strip("\x00").strip()
-    return str(value).strip()
-
-
-def _error_text(error: Exception) -> str:
-    args = getattr(error, "args", ())
-    if len(args) >= 2 and args[1]:
-        return _text(args[1])
-    return _text(str(error)) or type(error).__name__
-
-
-def _serial(device: Any, c_api: Any) -> str:
-    prop = c_api.ONI_DEVICE_PROPERTY_SERIAL_NUMBER
-    try:
-        if not device.is_property_supported(prop):
-            return ""
-        return _text(device.get_property(prop, ctypes.c_char * _SERIAL_BYTES).value)
-    except Exception:  # no serial is not an error
-        return ""
-
-
-def _enumerate(openni2: Any) -> list[str]:
-    """OpenNI2's device URIs, less the Dummy device (listed once it has been opened)."""
-    return [u for u in (_text(u) for u in openni2.Device.enumerate_uris()) if u != DUMMY]
-
-
-def attached_devices(library_dir: str = "") -> list[dict[str, str]]:
-    """Cameras OpenNI2 sees: ``uri`` (OpenNI's), ``serial`` (when readable), ``name``.
-
-    The Dummy device is never listed (OpenNI2 opens it on request only).
-    """
-    openni2 = _initialize(library_dir)
-    _, c_api = _modules()
-    out = []
-    for uri in _enumerate(openni2):
-        entry = {"uri": uri, "serial": "", "name": ""}
-        try:
-            device = openni2.Device(uri.encode())
-        except Exception:  # busy or not permitted: list it without serial
-            out.append(entry)
-            continue
-        try:
-            info = device.get_device_info()
-            entry["serial"] = _serial(device, c_api)
-            entry["name"] = f"{_text(info.vendor)} {_text(info.name)}".strip()
-        finally:
-            device.close()
-        out.append(entry)
-    return out
-
-
-# ---------------------------------------------------------------- intrinsics
-
-
-def intrinsics_from_fov(width: int, height: int, hfov: float, vfov: float) -> Intrinsics:
-    """Pinhole intrinsics of a ``width`` x ``height`` image with fields of view in radians.
-
-    The fields of view span the whole image (pixel edges), the principal
-    point is the image centre in the pixel-centre convention.
-    """
-    return Intrinsics(
-        fx=(width / 2.0) / math.tan(hfov / 2.0),
-        fy=(height / 2.0) / math.tan(vfov / 2.0),
-        cx=(width - 1) / 2.0,
-        cy=(height - 1) / 2.0,
-        width=width,
-        height=height,
-    )
-
-
-def _stream_fov(stream: Any) -> tuple[float, float] | None:
-    try:
-        hfov, vfov = stream.get_horizontal_fov(), stream.get_vertical_fov()
-    except Exception:  # ONI_STATUS_NOT_IMPLEMENTED on the Dummy device
-        return None
-    if not (0 < hfov < math.pi and 0 < vfov < math.pi):
-        return None
-    return hfov, vfov
-
-
-# -------------------------------------------------------------- the sensor
 
 
 class _Stream:
@@ -323,78 +160,14 @@ class OpenNISensor(LiveSensor):
         return self._id
 
     # ------------------------------------------------------------ device
-    def _resolve(self, openni2: Any, c_api: Any) -> bytes:
-        target = self.target
-        if target.lower() == DUMMY.lower():
-            return DUMMY.encode()
-        uris = _enumerate(openni2)
-        if not target:
-            if uris:
-                return uris[0].encode()
-            raise SensorError(self._nothing_attached(openni2))
-        if target in uris:
-            return target.encode()
-        match = _USB_PATH.match(target)
-        if match:
-            # A replugged camera gets a new address: take the one camera with these ids.
-            ids = f"{match.group(1)}/{match.group(2)}@".lower()
-            same = [u for u in uris if u.lower().startswith(ids)]
-            if len(same) == 1:
-                return same[0].encode()
-        for uri in uris:
-            try:
-                device = openni2.Device(uri.encode())
-            except Exception:  # busy: cannot be the one we may open
-                continue
-            try:
-                if _serial(device, c_api) == target:
-                    return uri.encode()
-            finally:
-                device.close()
-        raise SensorError(self._nothing_attached(openni2))
-
-    def _nothing_attached(self, openni2: Any) -> str:
-        from optrack.sensors.uri import attached_summary
-
-        what = (
-            f"no OpenNI2 camera with serial or URI '{self.target}'"
-            if self.target
-            else ("no OpenNI2 camera")
-        )
-        return (
-            f"{what} is attached ({attached_summary()}); check its cable, or use a URI that "
-            "'optrack sensors' lists (openni://Dummy is OpenNI2's test device)."
-        )
-
-    def _open_failure(self, uri: bytes, error: Exception) -> str:
-        from optrack.sensors import usb
-
-        match = _USB_PATH.match(_text(uri))
-        if match:
-            try:
-                cameras = usb.list_cameras()
-            except SensorError:
-                cameras = []
-            for camera in cameras:
-                if (
-                    camera.access == "denied"
-                    and camera.bus == int(match.group(3))
-                    and camera.address == int(match.group(4))
-                ):
-                    return usb.permission_message(camera)
-        return (
-            f"OpenNI2 could not open camera '{_text(uri)}' ({_error_text(error)}); check that no "
-            "other program is using it, or unplug and replug it."
-        )
-
     def _open_device(self) -> SensorInfo:
-        openni2 = _initialize(str(self.params.library_dir))
-        _, c_api = _modules()
-        uri = self._resolve(openni2, c_api)
+        openni2 = initialize(str(self.params.library_dir))
+        _, c_api = modules()
+        uri = resolve_uri(self.target, openni2, c_api)
         try:
             device = openni2.Device(uri)
         except Exception as error:  # OpenNIError and friends
-            raise SensorError(self._open_failure(uri, error)) from None
+            raise SensorError(open_failure(uri, error)) from None
         self.device = device
         try:
             return self._configure(openni2, c_api, device, uri)
@@ -404,7 +177,7 @@ class OpenNISensor(LiveSensor):
         except Exception as error:  # OpenNIError: the device went away meanwhile
             self._close_device()
             raise SensorError(
-                f"{self.describe()} failed while starting ({_error_text(error)}); unplug and "
+                f"{self.describe()} failed while starting ({error_text(error)}); unplug and "
                 "replug it, then try again."
             ) from None
         except BaseException:
@@ -414,14 +187,13 @@ class OpenNISensor(LiveSensor):
     def _configure(self, openni2: Any, c_api: Any, device: Any, uri: bytes) -> SensorInfo:
         from optrack.sensors.usb import lookup
 
-        p = self.params
         info = device.get_device_info()
-        self.serial = _serial(device, c_api) or self.serial
+        self.serial = serial_of(device, c_api) or self.serial
         if self._id is None:
             self._id = self.sensor_id
         self.modes = {}
         known = lookup(int(info.usbVendorId), int(info.usbProductId))
-        vendor_name = f"{_text(info.vendor)} {_text(info.name)}".strip()
+        vendor_name = f"{text(info.vendor)} {text(info.name)}".strip()
         if known is not None:
             self.model = known.model
         elif uri == DUMMY.encode():
@@ -431,6 +203,34 @@ class OpenNISensor(LiveSensor):
         if not device.has_sensor(openni2.SENSOR_DEPTH):
             raise SensorError(f"{self.describe()} has no depth sensor; it cannot be used here.")
 
+        self._create_streams(openni2, device)
+        depth_mode = self.modes["depth"]
+        self._depth_scale = (
+            0.0001 if int(depth_mode.format) == int(openni2.PIXEL_FORMAT_DEPTH_100_UM) else 0.001
+        )
+        self.clock.period = 1.0 / max(depth_mode.fps, 1.0)
+
+        self._set_options(openni2, c_api, device)
+        self._start_streams()
+        self._started_at = time.monotonic()
+        Library.sensors.add(self)
+        self._last_index = None
+        self._intrinsics, self._color_intrinsics = self._compute_intrinsics()
+        return SensorInfo(
+            id=self.sensor_id,
+            intrinsics=self._intrinsics,
+            model=self.model,
+            uri=self.uri,
+            depth_scale=self._depth_scale,
+            color_intrinsics=self._color_intrinsics,
+            fps=float(depth_mode.fps),
+            streams=list(self._streams),
+        )
+
+    def _create_streams(self, openni2: Any, device: Any) -> None:
+        """Depth, and colour and infrared where asked for and present, in the modes
+        nearest the parameters."""
+        p = self.params
         depth_formats = (
             openni2.PIXEL_FORMAT_DEPTH_1_MM,
             openni2.PIXEL_FORMAT_DEPTH_100_UM,
@@ -456,12 +256,10 @@ class OpenNISensor(LiveSensor):
                 self._add_stream(openni2, device, "infrared", openni2.SENSOR_IR, ir_formats, wanted)
             else:
                 log.warning("%s has no infrared sensor; recording without it.", self.describe())
-        depth_mode = self.modes["depth"]
-        self._depth_scale = (
-            0.0001 if int(depth_mode.format) == int(openni2.PIXEL_FORMAT_DEPTH_100_UM) else 0.001
-        )
-        self.clock.period = 1.0 / max(depth_mode.fps, 1.0)
 
+    def _set_options(self, openni2: Any, c_api: Any, device: Any) -> None:
+        """Registration, frame sync and mirroring, where the device supports them."""
+        p = self.params
         self.registered = False
         if "color" in self._streams and p.registration:
             mode = openni2.IMAGE_REGISTRATION_DEPTH_TO_COLOR
@@ -484,6 +282,8 @@ class OpenNISensor(LiveSensor):
                     stream.stream.set_mirroring_enabled(bool(p.mirror))
                 except Exception:  # mirroring is cosmetic
                     pass
+
+    def _start_streams(self) -> None:
         for kind, stream in self._streams.items():
             try:
                 stream.stream.start()
@@ -495,22 +295,8 @@ class OpenNISensor(LiveSensor):
                 )
                 raise SensorError(
                     f"{self.describe()} refused to start its {kind} stream "
-                    f"({_error_text(error)}){hint}."
+                    f"({error_text(error)}){hint}."
                 ) from None
-        self._started_at = time.monotonic()
-        _Library.sensors.add(self)
-        self._last_index = None
-        self._intrinsics, self._color_intrinsics = self._compute_intrinsics()
-        return SensorInfo(
-            id=self.sensor_id,
-            intrinsics=self._intrinsics,
-            model=self.model,
-            uri=self.uri,
-            depth_scale=self._depth_scale,
-            color_intrinsics=self._color_intrinsics,
-            fps=float(depth_mode.fps),
-            streams=list(self._streams),
-        )
 
     def _add_stream(
         self,
@@ -545,7 +331,7 @@ class OpenNISensor(LiveSensor):
             stream = device.create_stream(sensor_type)
         except Exception as error:
             raise SensorError(
-                f"{self.describe()} could not create its {kind} stream ({_error_text(error)})."
+                f"{self.describe()} could not create its {kind} stream ({error_text(error)})."
             ) from None
         try:
             current = stream.get_video_mode()
@@ -566,7 +352,7 @@ class OpenNISensor(LiveSensor):
         except Exception as error:
             stream.close()
             raise SensorError(
-                f"{self.describe()} refused the {kind} mode {mode} ({_error_text(error)})."
+                f"{self.describe()} refused the {kind} mode {mode} ({error_text(error)})."
             ) from None
         self.modes[kind] = mode
         self._streams[kind] = _Stream(kind, stream, mode)
@@ -575,8 +361,8 @@ class OpenNISensor(LiveSensor):
         nominal = tuple(math.radians(a) for a in NOMINAL_FOV_DEG)
         depth = self._streams["depth"]
         color = self._streams.get("color")
-        depth_fov = _stream_fov(depth.stream)
-        color_fov = _stream_fov(color.stream) if color else None
+        depth_fov = stream_fov(depth.stream)
+        color_fov = stream_fov(color.stream) if color else None
         reported = depth_fov is not None and (color is None or color_fov is not None)
         self.intrinsics_source = "device" if reported else "nominal"
         if not reported:
@@ -626,11 +412,11 @@ class OpenNISensor(LiveSensor):
             except Exception:
                 pass
             self.device = None
-        _Library.sensors.discard(self)
+        Library.sensors.discard(self)
 
     # ------------------------------------------------------------ frames
     def _grab(self, timeout: float) -> RGBDFrame | None:
-        openni2, _ = _modules()
+        openni2, _ = modules()
         deadline = time.monotonic() + timeout
         by_handle = {id(s.stream): s for s in self._streams.values()}
         handles = [s.stream for s in self._streams.values()]
@@ -654,7 +440,7 @@ class OpenNISensor(LiveSensor):
             except DeviceLost:
                 raise
             except Exception as error:  # OpenNIError: the device failed
-                raise DeviceLost(_error_text(error)) from None
+                raise DeviceLost(error_text(error)) from None
 
     def _take(self, stream: _Stream) -> None:
         oni_frame = stream.stream.read_frame()
