@@ -191,37 +191,7 @@ class RealSenseSensor(LiveSensor):
         config.enable_stream(
             rs.stream.depth, depth.width, depth.height, rs.format.z16, int(depth.fps)
         )
-        if p.color:
-            color = nearest_mode(
-                [
-                    m
-                    for m in self._profiles(rs, device, rs.stream.color, rs.format.rgb8)
-                    if m.fps == depth.fps
-                ],
-                depth.width,
-                depth.height,
-                depth.fps,
-            )
-            if color is not None:
-                config.enable_stream(
-                    rs.stream.color, color.width, color.height, rs.format.rgb8, int(color.fps)
-                )
-                self.modes["color"] = color
-            else:
-                log.warning("%s has no colour stream at %g Hz.", self.describe(), depth.fps)
-        if p.infrared:
-            ir = [
-                m
-                for m in self._profiles(rs, device, rs.stream.infrared, rs.format.y8, 1)
-                if (m.width, m.height, m.fps) == (depth.width, depth.height, depth.fps)
-            ]
-            if ir:
-                config.enable_stream(
-                    rs.stream.infrared, 1, depth.width, depth.height, rs.format.y8, int(depth.fps)
-                )
-                self.modes["infrared"] = ir[0]
-            else:
-                log.warning("%s has no infrared stream in mode %s.", self.describe(), depth)
+        self._enable_extra_streams(rs, device, config, depth)
         pipeline = rs.pipeline()
         try:
             profile = pipeline.start(config)
@@ -254,6 +224,41 @@ class RealSenseSensor(LiveSensor):
             fps=float(depth.fps),
             streams=list(self.modes),
         )
+
+    def _enable_extra_streams(self, rs: Any, device: Any, config: Any, depth: Mode) -> None:
+        """Colour and infrared, where asked for, in the depth stream's mode and rate."""
+        p = self.params
+        if p.color:
+            color = nearest_mode(
+                [
+                    m
+                    for m in self._profiles(rs, device, rs.stream.color, rs.format.rgb8)
+                    if m.fps == depth.fps
+                ],
+                depth.width,
+                depth.height,
+                depth.fps,
+            )
+            if color is not None:
+                config.enable_stream(
+                    rs.stream.color, color.width, color.height, rs.format.rgb8, int(color.fps)
+                )
+                self.modes["color"] = color
+            else:
+                log.warning("%s has no colour stream at %g Hz.", self.describe(), depth.fps)
+        if p.infrared:
+            ir = [
+                m
+                for m in self._profiles(rs, device, rs.stream.infrared, rs.format.y8, 1)
+                if (m.width, m.height, m.fps) == (depth.width, depth.height, depth.fps)
+            ]
+            if ir:
+                config.enable_stream(
+                    rs.stream.infrared, 1, depth.width, depth.height, rs.format.y8, int(depth.fps)
+                )
+                self.modes["infrared"] = ir[0]
+            else:
+                log.warning("%s has no infrared stream in mode %s.", self.describe(), depth)
 
     def _close_device(self) -> None:
         pipeline, self._pipeline = self._pipeline, None
