@@ -104,66 +104,78 @@ def synthetic_session(
             )
             for i, name in enumerate(names)
         }
+    world_T_camera = _camera_ring(names, rng, room_radius, camera_height)
+    session = SyntheticSession(board, intrinsics, world_T_camera, [], [], [])
+    half = room_radius * 0.55
+
+    def observe(world_T_board: np.ndarray, minimum: int) -> bool:
+        seen = {}
+        for name, pose in world_T_camera.items():
+            pixels = _visible(board, world_T_board, pose, intrinsics[name], max_angle_deg, 5.0)
+            if pixels is not None:
+                seen[name] = pixels + rng.normal(0.0, noise_px, pixels.shape)
+        if len(seen) < minimum:
+            return False
+        session.world_T_board.append(world_T_board)
+        session.corners.append(seen)
+        return True
+
+    attempts = 0
+    while len(session.world_T_board) < views:
+        attempts += 1
+        if attempts > 200 * views:
+            raise RuntimeError("the synthetic room cannot produce enough shared views.")
+        observe(_standing_board(rng, half, board), 2)
+    placed = attempts = 0
+    while placed < floor_views:
+        attempts += 1
+        if attempts > 1000 * max(floor_views, 1):
+            raise RuntimeError("no camera of the synthetic room sees the floor.")
+        placed += observe(_floor_board(rng, half, board, board_thickness), 1)
+    session.floor = [False] * views + [True] * floor_views
+    return session
+
+
+def _camera_ring(
+    names: list[str], rng: np.random.Generator, room_radius: float, camera_height: float
+) -> dict[str, np.ndarray]:
+    """world_T_camera of cameras spread round a ring, each looking near the room's centre."""
     world_T_camera = {}
     for i, name in enumerate(names):
-        angle = 2 * np.pi * i / sensors + rng.uniform(-0.1, 0.1)
+        angle = 2 * np.pi * i / len(names) + rng.uniform(-0.1, 0.1)
         eye = np.array(
             [room_radius * np.cos(angle), room_radius * np.sin(angle), camera_height]
         ) + rng.uniform(-0.2, 0.2, 3)
         target = np.array([*rng.uniform(-0.5, 0.5, 2), 0.8])
         world_T_camera[name] = look_at(eye, target)
-    boards: list[np.ndarray] = []
-    corners: list[dict[str, np.ndarray]] = []
-    floor: list[bool] = []
-    half = room_radius * 0.55
+    return world_T_camera
 
-    def observe(world_T_board: np.ndarray, minimum: int) -> bool:
-        seen = {}
-        for name in names:
-            pixels = _visible(
-                board, world_T_board, world_T_camera[name], intrinsics[name], max_angle_deg, 5.0
-            )
-            if pixels is not None:
-                seen[name] = pixels + rng.normal(0.0, noise_px, pixels.shape)
-        if len(seen) < minimum:
-            return False
-        boards.append(world_T_board)
-        corners.append(seen)
-        return True
 
-    attempts = 0
-    while len(boards) < views:
-        attempts += 1
-        if attempts > 200 * views:
-            raise RuntimeError("the synthetic room cannot produce enough shared views.")
-        centre = np.array([*rng.uniform(-half, half, 2), rng.uniform(0.6, 1.9)])
-        yaw = rng.uniform(0, 2 * np.pi)
-        tilt = rng.uniform(-0.5, 0.5)
-        roll = rng.uniform(-0.4, 0.4)
-        # Standing board: its face (-z) looks horizontally (towards +y turned by yaw),
-        # tilted about its x axis and turned in its own plane by roll.
-        rotation = (
-            Rotation.from_rotvec([0.0, 0.0, yaw]).as_matrix()
-            @ Rotation.from_rotvec([np.pi / 2 + tilt, 0.0, 0.0]).as_matrix()
-            @ Rotation.from_rotvec([0.0, 0.0, roll]).as_matrix()
-        )
-        pose = make_pose(rotation, centre - rotation @ board.center)
-        observe(pose, 2)
-    placed = 0
-    attempts = 0
-    while placed < floor_views:
-        attempts += 1
-        if attempts > 1000 * max(floor_views, 1):
-            raise RuntimeError("no camera of the synthetic room sees the floor.")
-        rotation = Rotation.from_euler("z", rng.uniform(0, 2 * np.pi)).as_matrix() @ np.diag(
-            [1.0, -1.0, -1.0]
-        )
-        centre = np.array([*rng.uniform(-half, half, 2), board_thickness])
-        pose = make_pose(rotation, centre - rotation @ board.center)
-        if observe(pose, 1):
-            placed += 1
-    floor = [False] * views + [True] * floor_views
-    return SyntheticSession(board, intrinsics, world_T_camera, boards, corners, floor)
+def _standing_board(rng: np.random.Generator, half: float, board: Checkerboard) -> np.ndarray:
+    """world_T_board of a board held somewhere in the room: its face (-z) looks
+    horizontally (towards +y turned by a random yaw), tilted about its x axis and turned
+    in its own plane."""
+    centre = np.array([*rng.uniform(-half, half, 2), rng.uniform(0.6, 1.9)])
+    yaw = rng.uniform(0, 2 * np.pi)
+    tilt = rng.uniform(-0.5, 0.5)
+    roll = rng.uniform(-0.4, 0.4)
+    rotation = (
+        Rotation.from_rotvec([0.0, 0.0, yaw]).as_matrix()
+        @ Rotation.from_rotvec([np.pi / 2 + tilt, 0.0, 0.0]).as_matrix()
+        @ Rotation.from_rotvec([0.0, 0.0, roll]).as_matrix()
+    )
+    return make_pose(rotation, centre - rotation @ board.center)
+
+
+def _floor_board(
+    rng: np.random.Generator, half: float, board: Checkerboard, thickness: float
+) -> np.ndarray:
+    """world_T_board of a board lying face up on the floor, turned at random."""
+    rotation = Rotation.from_euler("z", rng.uniform(0, 2 * np.pi)).as_matrix() @ np.diag(
+        [1.0, -1.0, -1.0]
+    )
+    centre = np.array([*rng.uniform(-half, half, 2), thickness])
+    return make_pose(rotation, centre - rotation @ board.center)
 
 
 def perturb_poses(
