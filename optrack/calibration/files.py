@@ -42,7 +42,7 @@ import yaml
 from optrack.errors import UserError
 from optrack.geometry import invert, pose_to_quaternion
 from optrack.io.files import atomic_write_bytes, atomic_write_text
-from optrack.types import Intrinsics, Matrix4, NetworkCalibration, SensorCalibration
+from optrack.types import Intrinsics, Matrix4, NetworkCalibration, SensorCalibration, as_matrix4
 
 __all__ = [
     "FORMAT_NAME",
@@ -66,11 +66,6 @@ FORMAT_VERSION = 1
 
 class CalibrationFileError(UserError):
     """A calibration file that cannot be read, written or used."""
-
-
-def _matrix(pose: np.ndarray) -> Matrix4:
-    pose = np.asarray(pose, dtype=np.float64)
-    return tuple(tuple(float(v) for v in row) for row in pose)  # type: ignore[return-value]
 
 
 class BoardEntry(msgspec.Struct, forbid_unknown_fields=True):
@@ -166,7 +161,7 @@ class CalibrationFile(msgspec.Struct, forbid_unknown_fields=True):
         """A copy with some sensors' poses replaced (other fields kept)."""
         sensors = dict(self.sensors)
         for sid, pose in world_T_camera.items():
-            sensors[sid] = msgspec.structs.replace(sensors[sid], world_T_camera=_matrix(pose))
+            sensors[sid] = msgspec.structs.replace(sensors[sid], world_T_camera=as_matrix4(pose))
         return msgspec.structs.replace(self, sensors=sensors, **fields)
 
 

@@ -35,7 +35,7 @@ from optrack.sim.models import MODELS, SensorModel
 from optrack.sim.render import RENDER_PARAMS, DynamicGeometry, SensorRenderer, StaticScene
 from optrack.sim.scenario import Scenario, ScenarioError, load_scenario
 from optrack.sim.venue import Venue
-from optrack.types import RGBDFrame
+from optrack.types import RGBDFrame, as_matrix4
 
 __all__ = ["SIM_PARAMS", "SimSensor", "Simulation", "WorldState"]
 
@@ -108,7 +108,7 @@ class SimSensor:
 
     @property
     def info(self) -> SensorInfo:
-        matrix = tuple(tuple(float(v) for v in row) for row in self.world_T_camera)
+        matrix = as_matrix4(self.world_T_camera)
         return SensorInfo(
             id=self.id,
             intrinsics=self.model.intrinsics,
@@ -520,7 +520,7 @@ class Simulation:
             )
         boards = []
         if state.board_pose is not None and self.board is not None:
-            matrix = tuple(tuple(float(v) for v in row) for row in state.board_pose)
+            matrix = as_matrix4(state.board_pose)
             boards.append(
                 BoardTruth(
                     world_T_board=matrix,  # type: ignore[arg-type]
