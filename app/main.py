@@ -18,9 +18,8 @@ import os
 import sys
 from collections.abc import Sequence
 
+from app.cli import add_gui_options
 from optrack.runtime.display import HEADLESS_HINT, display_problem
-
-PARENT_ENV = "OPTRACK_PARENT_PID"  # set by 'optrack run' in the processes it starts
 
 
 def configure_qt() -> None:
@@ -39,26 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="optrack gui", description="Open the operator application."
     )
-    parser.add_argument(
-        "--screenshot", metavar="PNG", help="save a screenshot of the window to this file"
-    )
-    parser.add_argument(
-        "--quit-after", type=float, metavar="S", help="close the window after S seconds"
-    )
-    parser.add_argument(
-        "--config", metavar="FILE", help="YAML configuration of the site (bus, site, stages)"
-    )
-    where = parser.add_mutually_exclusive_group()
-    where.add_argument(
-        "--join", action="store_true", help="join the site already running on this computer"
-    )
-    where.add_argument(
-        "--connect",
-        metavar="ENDPOINTS",
-        help="join a site on the network at these Zenoh endpoints (tcp/HOST:PORT, comma-separated)",
-    )
-    where.add_argument("--no-site", action="store_true", help="open without a site")
-    parser.add_argument("--site", help="site name (default: the configuration's site.name)")
+    add_gui_options(parser)
     return parser
 
 
@@ -73,6 +53,7 @@ def choose_source(args: argparse.Namespace, window):  # noqa: ANN001, ANN201 - Q
         return SiteSource(window)
     from app.bus_source import BusSource
     from optrack.runtime.config import load_node_config
+    from optrack.runtime.node import PARENT_ENV  # set by 'optrack run' in what it starts
 
     config = load_node_config(args.config)
     site = args.site or str(config["site"].name)
@@ -101,8 +82,11 @@ def choose_source(args: argparse.Namespace, window):  # noqa: ANN001, ANN201 - Q
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    return run(build_parser().parse_args(argv))
 
+
+def run(args: argparse.Namespace) -> int:
+    """Open the window as the parsed options of ``optrack gui`` say; its exit status."""
     problem = display_problem()
     if problem is not None:
         print(HEADLESS_HINT.format(reason=problem), file=sys.stderr)

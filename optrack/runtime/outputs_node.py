@@ -104,7 +104,7 @@ class OutputsNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m optrack.runtime.outputs_node --site NAME [--config FILE]``."""
-    from optrack.runtime.cli import run_outputs_node
+    from optrack.runtime.process import run_outputs_node
 
     parser = argparse.ArgumentParser(
         prog="python -m optrack.runtime.outputs_node",
@@ -112,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--site", required=True, help="site name")
     parser.add_argument("--config", help="YAML configuration")
-    return run_outputs_node(parser.parse_args(argv))
+    args = parser.parse_args(argv)
+    return run_outputs_node(args.site, args.config)
 
 
 if __name__ == "__main__":

@@ -19,12 +19,12 @@ __all__ = ["main", "preload"]
 
 
 def preload() -> None:
-    """Import everything a detector, tracker or outputs node imports."""
-    import optrack.cli  # noqa: F401
+    """Import everything a detector, tracker or outputs node imports. (The command line
+    that starts it, ``optrack.cli``, imports only the standard library and these.)"""
     import optrack.detection.pipeline  # noqa: F401
-    import optrack.runtime.cli  # noqa: F401
     import optrack.runtime.detector_node  # noqa: F401
     import optrack.runtime.outputs_node  # noqa: F401
+    import optrack.runtime.process  # noqa: F401
     import optrack.runtime.tracker_node  # noqa: F401
     import optrack.sensors.uri  # noqa: F401
     import optrack.tracking  # noqa: F401
