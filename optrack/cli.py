@@ -14,6 +14,7 @@ import json
 import sys
 import time
 from collections.abc import Callable, Sequence
+from importlib.metadata import entry_points
 from typing import Any
 
 from optrack import __version__
@@ -52,37 +53,6 @@ def resolve(handler: str | Handler) -> Handler:
 # ------------------------------------------------------------------ commands
 
 
-# Each benchmark is a handler "module:function" taking the parsed arguments.
-BENCHES: dict[str, str] = {
-    "sim": "optrack.sim.bench:cmd_bench_sim",
-    "detection": "optrack.detection.bench:bench_detection",
-    "tracking": "optrack.tracking.bench:cmd_bench_tracking",
-    "calibration": "optrack.calibration.bench:bench_calibration",
-    "e2e": "optrack.runtime.bench:bench_e2e",
-}
-
-
-def cmd_bench(args: argparse.Namespace) -> int:
-    return int(resolve(BENCHES[args.what])(args) or 0)
-
-
-def cmd_gui(args: argparse.Namespace) -> int:
-    from app.main import main as gui_main
-
-    argv: list[str] = []
-    if args.screenshot:
-        argv += ["--screenshot", args.screenshot]
-    if args.quit_after is not None:
-        argv += ["--quit-after", str(args.quit_after)]
-    for option in ("config", "connect", "site"):
-        if getattr(args, option, None):
-            argv += [f"--{option}", getattr(args, option)]
-    for flag in ("join", "no_site"):
-        if getattr(args, flag, False):
-            argv.append("--" + flag.replace("_", "-"))
-    return gui_main(argv)
-
-
 # ------------------------------------------------------------------- parser
 
 
@@ -104,6 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from optrack.detection import cli as detection_cli
     from optrack.io import cli as io_cli
+    from optrack.runtime import cli as runtime_cli
     from optrack.sensors import cli as sensors_cli
 
     def command(
@@ -321,79 +292,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_json(p)
 
-    # run
-    p = command(
-        "run",
-        "Run the embedded site (sensors, detectors, tracker) and stream to the outputs.",
-        "optrack.runtime.cli:cmd_run",
-    )
-    p.add_argument("--headless", action="store_true", help="no window")
-    p.add_argument("--seconds", type=float, help="stop after this many seconds")
-    p.add_argument(
-        "--udp",
-        action="append",
-        metavar="HOST:PORT",
-        help="UDP JSON destination (default 127.0.0.1:21234)",
-    )
-    p.add_argument("--config", help="YAML site configuration")
-    p.add_argument(
-        "--recording",
-        metavar="PATH",
-        help="play this recording through the pipeline (its sensors as the detector nodes)",
-    )
-    p.add_argument(
-        "--speed", type=float, default=1.0, help="--recording: times the recorded pace (0.25-4)"
-    )
-    p.add_argument(
-        "--loop", action="store_true", help="--recording: play it again at its end (else stop)"
-    )
+    runtime_cli.add_commands(commands, command)
 
-    # gui
-    p = command("gui", "Open the operator application.", cmd_gui)
-    p.add_argument(
-        "--screenshot", metavar="PNG", help="save a screenshot of the window to this file"
-    )
-    p.add_argument("--quit-after", type=float, metavar="S", help="close the window after S seconds")
-    p.add_argument("--config", metavar="FILE", help="YAML configuration of the site")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument(
-        "--join", action="store_true", help="join the site already running on this computer"
-    )
-    where.add_argument(
-        "--connect", metavar="ENDPOINTS", help="join a site on the network (tcp/HOST:PORT,...)"
-    )
-    where.add_argument("--no-site", action="store_true", help="open without a site")
-    p.add_argument("--site", help="site name (default: the configuration's site.name)")
+    # commands of the packages above the command line (the application's gui), which
+    # register themselves through the "optrack.commands" entry point group
+    for entry in entry_points(group="optrack.commands"):
+        entry.load()(commands, command)
 
     sensors_cli.add_commands(commands, command)
 
     io_cli.add_commands(commands, command)
 
-    # node
-    p = commands.add_parser(
-        "node",
-        help="Run one node of a distributed site.",
-        description="Run one node of a distributed site.",
-    )
-    p.set_defaults(handler=lambda a: _usage(p))
-    node = p.add_subparsers(dest="node_command", metavar="NODE")
-    q = command(
-        "detect",
-        "Detector node: capture one sensor, detect, publish detections.",
-        "optrack.runtime.cli:cmd_node_detect",
-        node,
-    )
-    q.add_argument("--sensor", required=True, metavar="URI", help="sensor URI")
-    q.add_argument("--site", required=True, help="site name")
-    q.add_argument("--config", help="YAML configuration")
-    q = command(
-        "track",
-        "Tracker node: all detections in, tracks out.",
-        "optrack.runtime.cli:cmd_node_track",
-        node,
-    )
-    q.add_argument("--site", required=True, help="site name")
-    q.add_argument("--config", help="YAML configuration")
     return parser
 
 
