@@ -7,8 +7,9 @@ process, on the bus, or not at all. Signals may be emitted from any thread
 
 The base class is the honest "no site": it never emits data, and it
 answers every request with a sentence on :attr:`SiteSource.log` saying that
-nothing was sent. A bus client subclasses it, emits the signals as messages
-arrive, and overrides the request methods.
+nothing was sent. :class:`app.bus_source.BusSource` subclasses it: it emits
+the events of an :class:`optrack.client.SiteClient` as these signals and
+hands it the requests.
 
 Status dictionaries (``status(node, values)``) are shown as they come; the
 keys the Sensors dock puts in columns are listed in :data:`SENSOR_STATUS_KEYS`
@@ -22,13 +23,11 @@ from typing import Any
 
 from PySide6.QtCore import QObject, Signal
 
-from optrack.outputs.streams import DEFAULT_OSC_PORT, DEFAULT_UDP_PORT, DEFAULT_WEBSOCKET_PORT
 from optrack.params import REGISTRY, Schema
 
 __all__ = [
     "NO_SITE",
     "NODE_STAGES",
-    "OUTPUT_KINDS",
     "SENSOR_STATUS_KEYS",
     "SiteSource",
     "node_schemas",
@@ -44,14 +43,6 @@ SENSOR_STATUS_KEYS: tuple[tuple[str, str, str], ...] = (
     ("dropped", "dropped", "{:d}"),
     ("last_error", "last error", "{}"),
 )
-
-OUTPUT_KINDS = ("udp", "osc", "websocket")
-# The ports optrack.outputs uses when an address leaves its port out.
-OUTPUT_PORTS = {
-    "udp": DEFAULT_UDP_PORT,
-    "osc": DEFAULT_OSC_PORT,
-    "websocket": DEFAULT_WEBSOCKET_PORT,
-}
 
 # The stages the site's nodes take live updates for, shown before a site says which it has.
 NODE_STAGES = ("detection", "tracking", "appearance", "smoothing", "outputs")
@@ -116,7 +107,8 @@ class SiteSource(QObject):
         self.log.emit("warning", f"{NO_SITE}: {names} was not sent to any node.")
 
     def add_output(self, kind: str, address: str) -> None:
-        """Start streaming tracks to a destination (``kind`` in :data:`OUTPUT_KINDS`)."""
+        """Start streaming tracks to a destination (``kind`` in
+        :data:`optrack.outputs.streams.OUTPUT_KINDS`)."""
         self.log.emit("warning", f"{NO_SITE}: the {kind} output {address} was not started.")
 
     def remove_output(self, kind: str, address: str) -> None:

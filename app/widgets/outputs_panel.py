@@ -23,8 +23,9 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.source import NO_SITE, OUTPUT_KINDS, OUTPUT_PORTS
+from app.source import NO_SITE
 from optrack.errors import UserError
+from optrack.outputs.streams import OUTPUT_KINDS, OUTPUT_PORTS
 from optrack.outputs.udp import parse_address
 
 KIND_TITLES = {"udp": "UDP JSON", "osc": "OSC", "websocket": "WebSocket"}

@@ -24,13 +24,21 @@ from optrack.outputs.websocket import WebSocketServer
 from optrack.params import Param, Params, Schema, register
 from optrack.types import TrackBatch
 
-__all__ = ["DEFAULT_UDP_PORT", "OUTPUTS_PARAMS", "Outputs"]
+__all__ = ["DEFAULT_UDP_PORT", "OUTPUTS_PARAMS", "OUTPUT_KINDS", "OUTPUT_PORTS", "Outputs"]
 
 log = logging.getLogger("optrack.outputs")
 
 DEFAULT_UDP_PORT = 21234  # OpenPTrack's
 DEFAULT_OSC_PORT = 21235
 DEFAULT_WEBSOCKET_PORT = 21236
+#: The kinds of destination of the ``outputs`` stage, each with the port of an address
+#: that leaves its port out.
+OUTPUT_PORTS = {
+    "udp": DEFAULT_UDP_PORT,
+    "osc": DEFAULT_OSC_PORT,
+    "websocket": DEFAULT_WEBSOCKET_PORT,
+}
+OUTPUT_KINDS = tuple(OUTPUT_PORTS)
 
 OUTPUTS_PARAMS = register(
     Schema(

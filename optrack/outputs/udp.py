@@ -14,11 +14,20 @@ import ipaddress
 import logging
 import socket
 import threading
+from collections.abc import Iterable
 
 from optrack.errors import UserError
 from optrack.net.messages import DestinationStatus
 
-__all__ = ["Destination", "OutputError", "UdpSender", "parse_address", "parse_destinations"]
+__all__ = [
+    "Destination",
+    "OutputError",
+    "UdpSender",
+    "join_destinations",
+    "parse_address",
+    "parse_destinations",
+    "split_destinations",
+]
 
 log = logging.getLogger("optrack.outputs")
 
@@ -56,9 +65,20 @@ def parse_address(
     return host, port
 
 
+def split_destinations(text: str) -> list[str]:
+    """The addresses of a destination list as the ``outputs`` stage writes it (separated by
+    commas; empty means none)."""
+    return [item.strip() for item in str(text).split(",") if item.strip()]
+
+
+def join_destinations(addresses: Iterable[str]) -> str:
+    """A list of addresses written as the ``outputs`` stage takes it."""
+    return ",".join(address.strip() for address in addresses)
+
+
 def parse_destinations(text: str, default_port: int, what: str) -> list[tuple[str, int]]:
     """Comma-separated addresses (see :func:`parse_address`); empty means none."""
-    return [parse_address(item, default_port, what) for item in text.split(",") if item.strip()]
+    return [parse_address(item, default_port, what) for item in split_destinations(text)]
 
 
 class Destination:

@@ -38,6 +38,7 @@ from optrack.errors import UserError
 from optrack.net.bus import Bus
 from optrack.net.keys import check_name
 from optrack.net.messages import StatusMessage
+from optrack.outputs.udp import join_destinations
 from optrack.params import Params, save_config
 from optrack.runtime.config import NodeConfig, state_dir
 from optrack.runtime.display import display_problem
@@ -118,7 +119,7 @@ class Site:
         self.params: Params = config["site"]
         self.name = check_name("site", str(self.params.name))
         if udp:
-            config["outputs"].update({"udp": ",".join(udp)})
+            config["outputs"].update({"udp": join_destinations(udp)})
         if seconds is not None and not seconds > 0:
             raise SiteError(f"--seconds must be > 0; got {seconds:g}.")
         self.headless = headless
