@@ -50,9 +50,6 @@ def resolve(handler: str | Handler) -> Handler:
     return getattr(importlib.import_module(module_name), function)
 
 
-# ------------------------------------------------------------------ commands
-
-
 # ------------------------------------------------------------------- parser
 
 
@@ -72,10 +69,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"optrack {__version__}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
 
+    from optrack.bench import cli as bench_cli
+    from optrack.calibration import cli as calibration_cli
     from optrack.detection import cli as detection_cli
+    from optrack.evaluation import cli as evaluation_cli
     from optrack.io import cli as io_cli
     from optrack.runtime import cli as runtime_cli
     from optrack.sensors import cli as sensors_cli
+    from optrack.sim import cli as sim_cli
 
     def command(
         name: str, help: str, handler: Callable[[argparse.Namespace], int], parent: Any = commands
@@ -84,213 +85,15 @@ def build_parser() -> argparse.ArgumentParser:
         sub.set_defaults(handler=handler)
         return sub
 
-    # sim
-    p = command(
-        "sim",
-        "Simulate a venue with walking people and write a recording with ground truth.",
-        "optrack.sim.cli:cmd_sim",
-    )
-    p.add_argument("scenario", help="scenario name or YAML file (resources/scenarios)")
-    p.add_argument("--out", required=True, help="output recording directory (must be new)")
-    p.add_argument(
-        "--seed", type=int, default=0, help="random seed (the same seed gives the same recording)"
-    )
-    p.add_argument("--seconds", type=float, help="simulated duration, s (default: the scenario's)")
-    p.add_argument("--sensors", type=int, help="number of sensors (default: the scenario's)")
-    p.add_argument("--people", type=int, help="number of people (default: the scenario's)")
-    p.add_argument(
-        "--sensor-model",
-        choices=("kinect2", "kinect1", "sr4500", "stereo"),
-        help="sensor model for every sensor",
-    )
-    p.add_argument("--config", help="YAML parameter file (sim_* stages, e.g. sim_kinect1)")
-    add_json(p)
+    sim_cli.add_commands(commands, command)
 
     detection_cli.add_commands(commands, command)
 
-    # eval
-    p = command(
-        "eval",
-        "Track a recording and score it against its ground truth (CLEAR MOT).",
-        "optrack.evaluation.run:cmd_eval",
-    )
-    p.add_argument("recording", help="recording directory with ground truth")
-    p.add_argument("--calibration", help="calibration file (default: the recording's true poses)")
-    p.add_argument("--config", help="YAML parameter file")
-    p.add_argument(
-        "--appearance",
-        choices=("auto", "on", "off"),
-        help="appearance recovery of identities (default: the config's, auto: on for one sensor)",
-    )
-    add_json(p)
+    evaluation_cli.add_commands(commands, command)
 
-    # calibrate
-    p = commands.add_parser(
-        "calibrate",
-        help="Calibrate intrinsics, stereo pairs and the camera network.",
-        description="Calibrate intrinsics, stereo pairs and the camera network.",
-    )
-    p.set_defaults(handler=lambda a: _usage(p))
-    calibrate = p.add_subparsers(dest="calibrate_command", metavar="STEP")
-    q = command(
-        "intrinsics",
-        "Intrinsics of one camera from chessboard images.",
-        "optrack.calibration.commands:cmd_intrinsics",
-        calibrate,
-    )
-    q.add_argument("images", nargs="+", help="chessboard images")
-    q.add_argument("--board", required=True, help="inner corners, columns x rows, e.g. 9x6")
-    q.add_argument("--square", type=float, required=True, help="square size, m")
-    q.add_argument(
-        "--infrared", action="store_true", help="infrared images (equalised, upsampled if small)"
-    )
-    q.add_argument("--out", help="also write the intrinsics to this YAML file")
-    q.add_argument(
-        "--config", help="YAML parameter file (calibration_corners, calibration_intrinsics)"
-    )
-    add_json(q)
-    q = command(
-        "stereo",
-        "Relative pose of a stereo pair from chessboard image pairs.",
-        "optrack.calibration.commands:cmd_stereo",
-        calibrate,
-    )
-    q.add_argument("--board", required=True, help="inner corners, columns x rows, e.g. 9x6")
-    q.add_argument("--square", type=float, required=True, help="square size, m")
-    q.add_argument("--left", nargs="+", required=True, help="left images")
-    q.add_argument("--right", nargs="+", required=True, help="right images (same order)")
-    add_json(q)
-    q = command(
-        "network",
-        "Calibrate every sensor of a recording (checkerboard, ground).",
-        "optrack.calibration.commands:cmd_network",
-        calibrate,
-    )
-    q.add_argument("recording", help="recording of the checkerboard session")
-    q.add_argument("--out", required=True, help="calibration file to write")
-    q.add_argument("--board", help="inner corners CxR (default: the recording's board)")
-    q.add_argument("--square", type=float, help="square size, m (default: the recording's)")
-    q.add_argument(
-        "--board-thickness", type=float, help="board face above the floor when laid on it, m"
-    )
-    q.add_argument(
-        "--floor",
-        default="auto",
-        help="which views lie on the floor: auto (depth test), none, after:SECONDS",
-    )
-    add_json(q)
-    q = command(
-        "refine",
-        "Refine a calibration from one person walking.",
-        "optrack.calibration.commands:cmd_refine",
-        calibrate,
-    )
-    q.add_argument("recording", help="recording of one person walking")
-    q.add_argument("--calibration", required=True, help="calibration file to refine")
-    q.add_argument("--out", required=True, help="refined calibration file to write")
-    q.add_argument(
-        "--rate", type=float, default=10.0, help="frames per second run through the detector"
-    )
-    q.add_argument(
-        "--dof",
-        choices=("full", "heading"),
-        default="full",
-        help="full: also level each camera's tilt (Algorithm 1); heading: keep the tilts",
-    )
-    add_json(q)
-    q = command(
-        "ground",
-        "Set the world frame: boards lying on the floor, or points of known coordinates.",
-        "optrack.calibration.commands:cmd_ground",
-        calibrate,
-    )
-    q.add_argument("recording", nargs="?", help="recording with the board on the floor")
-    q.add_argument("--calibration", required=True, help="calibration file to update")
-    q.add_argument("--out", required=True, help="calibration file to write")
-    q.add_argument("--points", help="YAML file of points with known world coordinates")
-    q.add_argument("--board", help="inner corners CxR (default: the calibration's board)")
-    q.add_argument("--square", type=float, help="square size, m")
-    q.add_argument(
-        "--board-thickness", type=float, help="board face above the floor when laid on it, m"
-    )
-    q.add_argument("--floor", default="auto", help="views on the floor: auto, all, after:SECONDS")
-    add_json(q)
-    q = command(
-        "board",
-        "Write a printable checkerboard (PDF or PNG) with its size printed on it.",
-        "optrack.calibration.commands:cmd_board",
-        calibrate,
-    )
-    q.add_argument("--board", default="9x6", help="inner corners, columns x rows (default 9x6)")
-    q.add_argument("--square", type=float, default=0.1, help="square size, m (default 0.1)")
-    q.add_argument("--out", required=True, help="output .pdf or .png")
-    q.add_argument("--paper", default="fit", help="fit, a4, a3, a2, a1, a0 or letter")
-    q.add_argument("--dpi", type=int, default=300, help="PNG resolution (default 300)")
-    add_json(q)
-    q = command(
-        "export",
-        "Export a calibration as OpenPTrack's camera_poses.yaml or ROS static transforms.",
-        "optrack.calibration.commands:cmd_export",
-        calibrate,
-    )
-    q.add_argument("calibration", help="calibration file")
-    q.add_argument("--format", required=True, choices=("openptrack", "ros"), help="what to write")
-    q.add_argument("--out", required=True, help="file to write")
-    q.add_argument("--parent", default="world", help="ROS parent frame (default world)")
-    add_json(q)
-    q = command(
-        "truth",
-        "Write a recording's true sensor poses as a calibration file (optionally perturbed).",
-        "optrack.calibration.commands:cmd_truth",
-        calibrate,
-    )
-    q.add_argument("recording", help="simulated recording (it knows its sensors' poses)")
-    q.add_argument("--out", required=True, help="calibration file to write")
-    q.add_argument("--perturb", metavar="M,DEG", help="move each sensor M metres, turn it DEG")
-    q.add_argument("--seed", type=int, default=0, help="seed of the perturbation's directions")
-    add_json(q)
-    q = command(
-        "live",
-        "The calibration wizard without a window: extrinsics, floor, refinement on a running site.",
-        "optrack.calibration.live:cmd_live",
-        calibrate,
-    )
-    q.add_argument("--site", help="site name (default: the config's site.name)")
-    q.add_argument("--board", default="6x5", help="inner corners CxR (default 6x5)")
-    q.add_argument("--square", type=float, default=0.2, help="square size, m (default 0.2)")
-    q.add_argument("--out", required=True, help="calibration file to write")
-    q.add_argument("--config", help="YAML parameter file (bus, calibration_live, ...)")
-    q.add_argument(
-        "--extrinsics-seconds", type=float, default=120.0, help="longest extrinsics phase, s"
-    )
-    q.add_argument(
-        "--min-views", type=int, default=3, help="extrinsics end when every sensor has this many"
-    )
-    q.add_argument("--floor-seconds", type=float, default=60.0, help="longest floor phase, s")
-    q.add_argument(
-        "--floor-views", type=int, default=3, help="the floor phase ends at this many floor views"
-    )
-    q.add_argument(
-        "--refine-seconds",
-        type=float,
-        default=0.0,
-        help="seconds of one person walking for the refinement (0: no refinement)",
-    )
-    q.add_argument("--no-publish", action="store_true", help="save only; do not send to the nodes")
-    add_json(q)
+    calibration_cli.add_commands(commands, command)
 
-    # bench
-    p = command(
-        "bench",
-        "Measure speed, memory and accuracy of one part of optrack.",
-        cmd_bench,
-    )
-    p.add_argument(
-        "what",
-        choices=tuple(BENCHES),
-        help="what to measure",
-    )
-    add_json(p)
+    bench_cli.add_commands(commands, command)
 
     runtime_cli.add_commands(commands, command)
 

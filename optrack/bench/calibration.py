@@ -36,29 +36,26 @@ are in docs/calibration.md.
 
 from __future__ import annotations
 
-import argparse
-import json
 import platform
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-import optrack
+from optrack.bench.common import shared_data
 from optrack.calibration.network import NETWORK_PARAMS, NetworkCalibrator
 from optrack.calibration.quality import calibration_errors
-from optrack.calibration.synthetic import perturb_poses, synthetic_session, synthetic_walk
+from optrack.calibration.synthetic import (
+    SyntheticSession,
+    perturb_poses,
+    synthetic_session,
+    synthetic_walk,
+)
 
-__all__ = ["bench_calibration", "opencv_stereo_pose"]
+__all__ = ["OPENCV_FX", "calibration_bench", "opencv_stereo_pose"]
 
 OPENCV_FX = 536.1  # the issue's reference for OpenCV's left*.jpg (left_intrinsics.yml: 535.9)
-
-
-def _opencv_data() -> Path:
-    """../shared/data/opencv beside the project checkout."""
-    return Path(optrack.__file__).resolve().parent.parent.parent / "shared" / "data" / "opencv"
 
 
 def opencv_stereo_pose(left, right, k_left, k_right, board, size) -> np.ndarray:
@@ -89,8 +86,8 @@ def _stereo_figures(folder: Path) -> dict[str, Any]:
     """The left camera's intrinsics and the stereo pose against cv2.stereoCalibrate."""
 
     from optrack.calibration.board import Checkerboard
-    from optrack.calibration.commands import stereo_calibrate
     from optrack.calibration.intrinsics import calibrate_intrinsics, corners_from_images
+    from optrack.calibration.stereo import stereo_calibrate
     from optrack.geometry import make_pose, rotation_angle_deg
 
     board = Checkerboard(9, 6, 0.025)
@@ -180,13 +177,10 @@ def _refinement_figures() -> dict[str, Any]:
     }
 
 
-def bench_calibration(args: argparse.Namespace) -> int:
-    repeat = 3
-    sensors, views = 10, 300
-    session = synthetic_session(sensors, views, floor_views=3, seed=0)
-    corners_per_update = float(np.mean([len(c) for c in session.corners]))
-
-    batch_seconds, batch_cpu_seconds, batch_errors = [], [], None
+def _global_solve_figures(session: SyntheticSession, repeat: int) -> dict[str, Any]:
+    """The global solve from scratch (no incremental tree), ``repeat`` times: median wall
+    and CPU seconds, and how far the last solution is from the truth."""
+    seconds, cpu_seconds, errors = [], [], None
     for _ in range(repeat):
         calibrator = NetworkCalibrator(
             session.board, session.intrinsics, NETWORK_PARAMS.create({"incremental": False})
@@ -195,10 +189,22 @@ def bench_calibration(args: argparse.Namespace) -> int:
             calibrator.add(corners, floor=floor)
         started, started_cpu = time.perf_counter(), time.process_time()
         result = calibrator.solve()
-        batch_seconds.append(time.perf_counter() - started)
-        batch_cpu_seconds.append(time.process_time() - started_cpu)
-        batch_errors = calibration_errors(result.world_T_camera, session.world_T_camera)
+        seconds.append(time.perf_counter() - started)
+        cpu_seconds.append(time.process_time() - started_cpu)
+        errors = calibration_errors(result.world_T_camera, session.world_T_camera)
+    assert errors is not None
+    return {
+        "ba_seconds_10x300": float(np.median(seconds)),
+        "ba_cpu_seconds_10x300": float(np.median(cpu_seconds)),
+        "max_position_error_m": errors.max_position_error_m,
+        "max_rotation_error_deg": errors.max_rotation_error_deg,
+        "ground_error_deg": errors.ground_error_deg,
+    }
 
+
+def _live_feedback_figures(session: SyntheticSession) -> dict[str, Any]:
+    """Views streamed into the live (incremental) solver one by one: the time of each
+    update, then the final solve from the live state."""
     calibrator = NetworkCalibrator(session.board, session.intrinsics, NETWORK_PARAMS.create())
     update_seconds = []
     for corners, floor in zip(session.corners, session.floor, strict=True):
@@ -206,60 +212,40 @@ def bench_calibration(args: argparse.Namespace) -> int:
         calibrator.add(corners, floor=floor)
         update_seconds.append(time.perf_counter() - started)
     started = time.perf_counter()
-    live_result = calibrator.solve()
+    result = calibrator.solve()
     final_from_live = time.perf_counter() - started
     median_update = float(np.median(update_seconds))
-    assert batch_errors is not None
-    payload = {
-        "ba_seconds_10x300": float(np.median(batch_seconds)),
-        "ba_cpu_seconds_10x300": float(np.median(batch_cpu_seconds)),
+    return {
         "feedback_hz": 1.0 / median_update,
         "feedback_ms_median": median_update * 1000.0,
         "feedback_ms_p95": float(np.percentile(update_seconds, 95)) * 1000.0,
         "feedback_ms_max": float(np.max(update_seconds)) * 1000.0,
         "ba_seconds_from_live": final_from_live,
+        "floor_views": result.floor_views,
+        "reprojection_rms_px": result.rms_px,
+    }
+
+
+def calibration_bench() -> dict[str, Any]:
+    """The figures of ``optrack bench calibration`` (see the module docstring)."""
+    repeat = 3
+    sensors, views = 10, 300
+    session = synthetic_session(sensors, views, floor_views=3, seed=0)
+    payload = {
+        **_global_solve_figures(session, repeat),
+        **_live_feedback_figures(session),
         "sensors": sensors,
         "board_views": views,
-        "floor_views": live_result.floor_views,
-        "sensors_per_view": corners_per_update,
-        "reprojection_rms_px": live_result.rms_px,
-        "max_position_error_m": batch_errors.max_position_error_m,
-        "max_rotation_error_deg": batch_errors.max_rotation_error_deg,
-        "ground_error_deg": batch_errors.ground_error_deg,
+        "sensors_per_view": float(np.mean([len(c) for c in session.corners])),
         "repeat": repeat,
         "machine": platform.processor() or platform.machine(),
     }
     payload.update(_refinement_figures())
-    folder = _opencv_data()
+    folder = shared_data() / "opencv"
     if folder.is_dir():
         payload.update(_stereo_figures(folder))
         payload.update(_replica_figures(folder))
     else:
         payload.update(dict.fromkeys(("intrinsics_left_fx", "stereo_baseline_m"), None))
         payload["stereo_skipped"] = f"OpenCV's chessboard images not found at {folder}"
-    if getattr(args, "json", False):
-        sys.stdout.write(json.dumps(payload) + "\n")
-    else:
-        print(
-            f"global solve {payload['ba_seconds_10x300']:.2f} s (10 sensors x 300 views); "
-            f"live feedback {payload['feedback_hz']:.1f} Hz; refinement "
-            f"{payload['refinement_error_before_m'] * 100:.1f} -> "
-            f"{payload['refinement_error_after_m'] * 100:.1f} cm",
-            file=sys.stderr,
-        )
-        if payload.get("stereo_baseline_m") is not None:
-            print(
-                f"OpenCV's images: left fx {payload['intrinsics_left_fx']:.2f} "
-                f"({payload['intrinsics_left_fx_error_pct']:.2f} % from {OPENCV_FX}); stereo "
-                f"baseline {payload['stereo_baseline_m'] * 1000:.3f} mm "
-                f"({payload['stereo_baseline_error_pct']:.4f} % from cv2.stereoCalibrate), "
-                f"rotation {payload['stereo_rotation_error_deg']:.4f} deg from it",
-                file=sys.stderr,
-            )
-            print(
-                f"replica of OpenCV's board, true fx {payload['intrinsics_replica_true_fx']:.2f}: "
-                f"ours {payload['intrinsics_replica_fx_error_pct']:+.3f} %, OpenCV's sample "
-                f"method {payload['intrinsics_replica_fx_error_pct_opencv_sample']:+.3f} %",
-                file=sys.stderr,
-            )
-    return 0
+    return payload

@@ -20,11 +20,8 @@ also counts other work.
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -33,7 +30,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-import optrack
+from optrack.bench.common import info, pin_to_one_core, shared_data
 from optrack.detection.ground import check_ground
 from optrack.detection.params import detection_params
 from optrack.detection.pipeline import PeopleDetector
@@ -42,9 +39,8 @@ from optrack.types import Intrinsics
 __all__ = [
     "PCL_GROUND",
     "PCL_PEOPLE_XZ",
-    "bench_detection",
+    "detection_bench",
     "match_people",
-    "real_data_dir",
     "real_frame_figures",
 ]
 
@@ -74,11 +70,6 @@ TARGETS = {
 }
 
 
-def real_data_dir() -> Path:
-    """../shared/data beside the project checkout."""
-    return Path(optrack.__file__).resolve().parent.parent.parent / "shared" / "data"
-
-
 def match_people(found_xz: np.ndarray, expected_xz: np.ndarray) -> tuple[int, float]:
     """One-to-one matching (Hungarian) of found to expected floor positions:
     (number matched, largest distance among the matches, metres)."""
@@ -89,10 +80,6 @@ def match_people(found_xz: np.ndarray, expected_xz: np.ndarray) -> tuple[int, fl
     cost = np.linalg.norm(found_xz[:, None, :] - expected_xz[None, :, :], axis=2)
     rows, cols = linear_sum_assignment(cost)
     return len(rows), float(cost[rows, cols].max())
-
-
-def _info(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
 
 
 def real_frame_figures(data: Path) -> dict[str, Any]:
@@ -174,8 +161,6 @@ def _pinned_fps(frames: list[Any], detector: PeopleDetector) -> dict[str, float]
     previous = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
     threads = cv2.getNumThreads()
     try:
-        from optrack.sim.bench import pin_to_one_core
-
         pin_to_one_core()
         for frame in frames[:WARM_UP]:
             detector.process(frame)
@@ -207,7 +192,7 @@ def _simulated(work: Path) -> dict[str, Any]:
         ("dark_mixed", _dark_mixed(), None),
     ]
     for name, scenario, sensors in runs:
-        _info(f"bench detection: simulating {name} ({SIM_SECONDS:g} s, seed {SIM_SEED})...")
+        info(f"bench detection: simulating {name} ({SIM_SECONDS:g} s, seed {SIM_SEED})...")
         path = _simulate(work / name, scenario, sensors)
         score = evaluate_recording(path)
         out[f"{name}_recall"] = score.recall
@@ -217,45 +202,45 @@ def _simulated(work: Path) -> dict[str, Any]:
         out[f"{name}_confidence_sources"] = dict(score.sources)
     recording = Recording(work / "crowd")
     sensor = recording.sensor_ids[0]
-    info = recording.sensors[sensor]
+    sensor_info = recording.sensors[sensor]
     frames = [
         recording.load(sensor, entry)
         for _, entry in zip(range(FPS_FRAMES), recording.index(sensor), strict=False)
     ]
     detector = PeopleDetector(
-        detection_params(info.model),
+        detection_params(sensor_info.model),
         sensor_id=sensor,
-        world_T_camera=np.asarray(info.world_T_camera),
+        world_T_camera=np.asarray(sensor_info.world_T_camera),
     )
-    _info(f"bench detection: timing {len(frames)} Kinect v2 frames on one core...")
+    info(f"bench detection: timing {len(frames)} Kinect v2 frames on one core...")
     out.update(_pinned_fps(frames, detector))
     # OpenPTrack's own sampling factor for Kinects: faster, but far people fall apart.
     openptrack = {"sampling_factor": OPENPTRACK_KINECT_SAMPLING}
     detector = PeopleDetector(
-        detection_params(info.model, overrides=openptrack),
+        detection_params(sensor_info.model, overrides=openptrack),
         sensor_id=sensor,
-        world_T_camera=np.asarray(info.world_T_camera),
+        world_T_camera=np.asarray(sensor_info.world_T_camera),
     )
     fps = _pinned_fps(frames, detector)
     out["kinect2_fps_sampling_factor_4"] = fps["kinect2_fps"]
     out["kinect2_fps_cpu_sampling_factor_4"] = fps["kinect2_fps_cpu"]
     score = evaluate_recording(
-        work / "crowd", params=detection_params(info.model, overrides=openptrack)
+        work / "crowd", params=detection_params(sensor_info.model, overrides=openptrack)
     )
     out["crowd_recall_sampling_factor_4"] = score.recall
     out["crowd_precision_sampling_factor_4"] = score.precision
     return out
 
 
-def bench_detection(args: argparse.Namespace) -> int:
-    """The ``optrack bench detection`` command."""
+def detection_bench() -> dict[str, Any]:
+    """The figures of ``optrack bench detection`` (see the module docstring)."""
     result: dict[str, Any] = {"five_people_ms": None, "kinect2_fps": None, "targets": TARGETS}
-    data = real_data_dir()
+    data = shared_data()
     if (data / "pcl" / "five_people.pcd").is_file():
-        _info(f"bench detection: real frames from {data / 'pcl'} ({RUNS} timed runs)...")
+        info(f"bench detection: real frames from {data / 'pcl'} ({RUNS} timed runs)...")
         result.update(real_frame_figures(data))
     else:
-        _info(f"bench detection: no real data at {data}; the real-frame figures are null.")
+        info(f"bench detection: no real data at {data}; the real-frame figures are null.")
     with tempfile.TemporaryDirectory(prefix="optrack-bench-detection-") as work:
         result.update(_simulated(Path(work)))
     result["targets_met"] = {
@@ -265,10 +250,4 @@ def bench_detection(args: argparse.Namespace) -> int:
         )
         for key, target in TARGETS.items()
     }
-    if args.json:
-        sys.stdout.write(json.dumps(result) + "\n")
-        sys.stdout.flush()
-    else:
-        for key, value in result.items():
-            _info(f"  {key}: {value}")
-    return 0
+    return result

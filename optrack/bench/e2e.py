@@ -24,24 +24,29 @@ when the computer cannot keep up, the detectors skip frames, and ``hz``,
 
 from __future__ import annotations
 
-import argparse
+import dataclasses
 import json
 import os
 import socket
 import statistics
-import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from optrack.params import Param, Schema
+from optrack.bench.common import info
+from optrack.params import Param, Params, Schema
+from optrack.recording import Recording
+from optrack.runtime.config import load_node_config
+from optrack.runtime.site import Site
 from optrack.runtime.site_params import SITE_PARAMS
+from optrack.runtime.venue import venue_recording
 
-__all__ = ["E2E_BENCH", "bench_e2e"]
+__all__ = ["E2E_BENCH", "e2e_bench"]
 
 # The measurement protocol (not registered: nothing a site runs).
 E2E_BENCH = Schema(
@@ -107,117 +112,139 @@ def _percentile(values: list[float], q: float) -> float:
     return float(np.percentile(np.asarray(values), q)) if values else float("nan")
 
 
-def bench_e2e(args: argparse.Namespace, overrides: dict[str, dict[str, Any]] | None = None) -> int:
-    """``overrides``: stage values laid over the site's (to compare settings)."""
-    from optrack.recording import Recording
-    from optrack.runtime.cli import setup_logging
-    from optrack.runtime.config import load_node_config
-    from optrack.runtime.site import Site, venue_recording
+class _Receiver:
+    """A UDP socket on 127.0.0.1 that keeps every datagram with its arrival time."""
 
-    protocol = E2E_BENCH.create()
-    setup_logging("optrack bench e2e")
-    venue = venue_recording(
-        str(protocol.scenario), 0, float(protocol.venue_seconds)
-    )  # rendered once, then cached
-    recording = Recording(venue)
-    sensors = recording.sensor_ids
-    fps = [float(recording.sensors[s].fps or 0.0) for s in sensors]
-    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    receiver.bind(("127.0.0.1", 0))
-    receiver.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        hub_port = probe.getsockname()[1]
-    arrivals: list[tuple[float, bytes]] = []
-    stop = threading.Event()
+    def __init__(self) -> None:
+        self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.socket.bind(("127.0.0.1", 0))
+        self.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        self.arrivals: list[tuple[float, bytes]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._receive, daemon=True)
 
-    def receive() -> None:
-        receiver.settimeout(0.2)
-        while not stop.is_set():
+    @property
+    def address(self) -> str:
+        return f"127.0.0.1:{self.socket.getsockname()[1]}"
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def _receive(self) -> None:
+        self.socket.settimeout(0.2)
+        while not self._stop.is_set():
             try:
-                data = receiver.recv(65536)
+                data = self.socket.recv(65536)
             except TimeoutError:
                 continue
-            arrivals.append((time.time(), data))
+            self.arrivals.append((time.time(), data))
 
-    with tempfile.TemporaryDirectory(prefix="optrack-bench-") as state:
-        values: dict[str, dict[str, Any]] = {
-            "bus": {"local_port": hub_port},
-            "site": {
-                "name": "bench",
-                "sensors": ",".join(f"file://{venue}?loop=bounce#{s}" for s in sensors),
-                "report_s": 0.0,
-            },
-            # the detectors of the embedded venue, as 'optrack run' starts them
-            "node": {
-                "state_dir": state,
-                "replay_max_age_s": float(SITE_PARAMS["venue_max_age_s"].default),
-            },
-            "outputs": {"udp": f"127.0.0.1:{receiver.getsockname()[1]}"},
-        }
-        for stage, changed in (overrides or {}).items():
-            values.setdefault(stage, {}).update(changed)
-        config = load_node_config(None, values)
-        site = Site(config, headless=True)
-        thread = threading.Thread(target=receive, daemon=True)
-        thread.start()
-        load_before = os.getloadavg()
-        print(
-            f"optrack bench e2e: {len(sensors)} sensors at {statistics.median(fps):g} Hz from "
-            f"{venue}; warm-up {float(protocol.warmup_s):g} s, then {float(protocol.seconds):g} s "
-            f"measured (load average {load_before[0]:.1f} on {os.cpu_count()} cores)",
-            file=sys.stderr,
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(2.0)
+        self.socket.close()
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def _site_values(
+    venue: Path, sensors: list[str], state: str, udp: str, overrides: dict | None
+) -> dict[str, dict[str, Any]]:
+    """The site's configuration: the venue's sensors as ``optrack run`` starts them, its
+    outputs to ``udp``, ``overrides`` laid over it."""
+    values: dict[str, dict[str, Any]] = {
+        "bus": {"local_port": _free_port()},
+        "site": {
+            "name": "bench",
+            "sensors": ",".join(f"file://{venue}?loop=bounce#{s}" for s in sensors),
+            "report_s": 0.0,
+        },
+        # the detectors of the embedded venue, as 'optrack run' starts them
+        "node": {
+            "state_dir": state,
+            "replay_max_age_s": float(SITE_PARAMS["venue_max_age_s"].default),
+        },
+        "outputs": {"udp": udp},
+    }
+    for stage, changed in (overrides or {}).items():
+        values.setdefault(stage, {}).update(changed)
+    return values
+
+
+@dataclasses.dataclass
+class _Window:
+    """What the site did over the measured window."""
+
+    t0_wall: float
+    t1_wall: float
+    elapsed: float
+    statuses_before: dict[str, Any]
+    statuses: dict[str, Any]
+    cpu: dict[str, float]  # CPU seconds of each process (by node name; "launcher": this one)
+    roles: dict[str, str]
+    restarts: int
+
+
+def _supervise(site: Site, seconds: float, done: Callable[[], bool] | None = None) -> None:
+    """Keep the site running for ``seconds`` (or until ``done()``)."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end and not (done is not None and done()):
+        site.supervise_once(time.monotonic())
+        time.sleep(0.1)
+
+
+def _measure(site: Site, protocol: Params, sensors: list[str]) -> _Window:
+    """Start the site, wait until every node runs, warm up, then measure the window."""
+    site.start()
+    pids = {"launcher": os.getpid()}
+    # Every node up and processing first (imports take long on a busy computer),
+    # then the warm-up proper.
+
+    def running() -> bool:
+        return _running(site.statuses, sensors)
+
+    _supervise(site, float(protocol.start_timeout_s), running)
+    if not running():
+        info(
+            "optrack bench e2e: not every node was running after "
+            f"{float(protocol.start_timeout_s):g} s; measuring anyway."
         )
-        try:
-            site.start()
-            pids = {"launcher": os.getpid()}
-            # Every node up and processing first (imports take long on a busy computer),
-            # then the warm-up proper.
-            ready_by = time.monotonic() + float(protocol.start_timeout_s)
-            while time.monotonic() < ready_by and not _running(site.statuses, sensors):
-                site.supervise_once(time.monotonic())
-                time.sleep(0.1)
-            if not _running(site.statuses, sensors):
-                print(
-                    "optrack bench e2e: not every node was running after "
-                    f"{float(protocol.start_timeout_s):g} s; measuring anyway.",
-                    file=sys.stderr,
-                )
-            warm_until = time.monotonic() + float(protocol.warmup_s)
-            while time.monotonic() < warm_until:
-                site.supervise_once(time.monotonic())
-                time.sleep(0.1)
-            for child in site.children:
-                if child.pid is not None:
-                    pids[child.name] = child.pid
-            roles = {c.name: c.role for c in site.children}
-            cpu_before = {name: _cpu_seconds(pid) for name, pid in pids.items()}
-            restarts_before = sum(c.restarts for c in site.children)
-            t0_wall, t0 = time.time(), time.monotonic()
-            statuses_before = dict(site.statuses)
-            end = t0 + float(protocol.seconds)
-            while time.monotonic() < end:
-                site.supervise_once(time.monotonic())
-                time.sleep(0.1)
-            elapsed = time.monotonic() - t0
-            # A node restarted meanwhile is not counted (its pid is gone); see "restarts".
-            cpu = {
-                name: max(0.0, _cpu_seconds(pid) - cpu_before[name]) for name, pid in pids.items()
-            }
-            t1_wall = time.time()
-            statuses = dict(site.statuses)
-            restarts = sum(c.restarts for c in site.children) - restarts_before
-        finally:
-            site.stop()
-            stop.set()
-            thread.join(2.0)
-            receiver.close()
+    _supervise(site, float(protocol.warmup_s))
+    for child in site.children:
+        if child.pid is not None:
+            pids[child.name] = child.pid
+    cpu_before = {name: _cpu_seconds(pid) for name, pid in pids.items()}
+    restarts_before = sum(c.restarts for c in site.children)
+    t0_wall, t0 = time.time(), time.monotonic()
+    statuses_before = dict(site.statuses)
+    _supervise(site, float(protocol.seconds))
+    elapsed = time.monotonic() - t0
+    # A node restarted meanwhile is not counted (its pid is gone); see "restarts".
+    cpu = {name: max(0.0, _cpu_seconds(pid) - cpu_before[name]) for name, pid in pids.items()}
+    return _Window(
+        t0_wall=t0_wall,
+        t1_wall=time.time(),
+        elapsed=elapsed,
+        statuses_before=statuses_before,
+        statuses=dict(site.statuses),
+        cpu=cpu,
+        roles={c.name: c.role for c in site.children},
+        restarts=sum(c.restarts for c in site.children) - restarts_before,
+    )
 
+
+def _datagram_figures(arrivals: list[tuple[float, bytes]], window: _Window) -> dict[str, Any]:
+    """Latency of every datagram with a stamp not seen before, and the datagram rates."""
     latencies, frames, beats, repeats, tracks_seen = [], 0, 0, 0, 0
     counts: list[int] = []
     stamps_seen: set[tuple[int, int]] = set()
     for arrived, data in arrivals:
-        if not t0_wall <= arrived <= t1_wall:
+        if not window.t0_wall <= arrived <= window.t1_wall:
             continue
         document = json.loads(data)
         header = document["header"]
@@ -234,38 +261,42 @@ def bench_e2e(args: argparse.Namespace, overrides: dict[str, dict[str, Any]] | N
         stamps_seen.add(key)
         stamp = key[0] + key[1] * 1e-9
         latencies.append((arrived - stamp) * 1000.0)
-    people = _people(recording)
-
-    def delta(node: str, value: str) -> float | None:
-        """How much a node's counter grew over the measured window, per second."""
-        if node not in statuses or node not in statuses_before:
-            return None
-        after = statuses[node].values.get(value)
-        before = statuses_before[node].values.get(value)
-        if not isinstance(after, (int, float)) or not isinstance(before, (int, float)):
-            return None
-        return (after - before) / elapsed
-
-    detector_hz = [statuses[s].fps for s in sensors if s in statuses]
-    detector_ms = [statuses[s].latency_ms for s in sensors if s in statuses]
-    detector_values = [statuses[s].values for s in sensors if s in statuses]
-    dropped = sum(
-        statuses[s].dropped - (statuses_before[s].dropped if s in statuses_before else 0)
-        for s in sensors
-        if s in statuses
-    )
-    by_role: dict[str, float] = {}
-    for name, seconds in cpu.items():
-        role = roles.get(name, "launcher")
-        by_role[role] = by_role.get(role, 0.0) + 100.0 * seconds / elapsed
-    result: dict[str, Any] = {
+    elapsed = window.elapsed
+    return {
         "latency_ms_median": statistics.median(latencies) if latencies else None,
         "latency_ms_p95": _percentile(latencies, 95) if latencies else None,
         "latency_ms_max": max(latencies) if latencies else None,
-        "sensors": len(sensors),
-        "hz": statistics.median(fps),
-        "detector_hz": detector_hz,
-        "detector_latency_ms": detector_ms,
+        "output_hz": frames / elapsed,
+        "repeat_hz": repeats / elapsed,
+        "heartbeat_hz": beats / elapsed,
+        "datagrams": frames + beats,
+        "max_tracks": tracks_seen,
+        "tracks_p95": _percentile([float(c) for c in counts], 95) if counts else None,
+    }
+
+
+def _node_figures(window: _Window, sensors: list[str]) -> dict[str, Any]:
+    """The nodes' own figures over the window (their status reports) and their CPU use."""
+    statuses, before = window.statuses, window.statuses_before
+
+    def delta(node: str, value: str) -> float | None:
+        """How much a node's counter grew over the measured window, per second."""
+        if node not in statuses or node not in before:
+            return None
+        after_value = statuses[node].values.get(value)
+        before_value = before[node].values.get(value)
+        if not isinstance(after_value, (int, float)) or not isinstance(before_value, (int, float)):
+            return None
+        return (after_value - before_value) / window.elapsed
+
+    detector_values = [statuses[s].values for s in sensors if s in statuses]
+    by_role: dict[str, float] = {}
+    for name, seconds in window.cpu.items():
+        role = window.roles.get(name, "launcher")
+        by_role[role] = by_role.get(role, 0.0) + 100.0 * seconds / window.elapsed
+    return {
+        "detector_hz": [statuses[s].fps for s in sensors if s in statuses],
+        "detector_latency_ms": [statuses[s].latency_ms for s in sensors if s in statuses],
         "detector_frames_hz": [delta(s, "frames") for s in sensors],
         "tracker_batches_hz": delta("tracker", "batches"),
         "tracker_sent_hz": delta("tracker", "published"),
@@ -274,27 +305,57 @@ def bench_e2e(args: argparse.Namespace, overrides: dict[str, dict[str, Any]] | N
         "detector_processing_ms": [v.get("processing_ms") for v in detector_values],
         "tracker_latency_ms": statuses["tracker"].latency_ms if "tracker" in statuses else None,
         "outputs_latency_ms": statuses["outputs"].latency_ms if "outputs" in statuses else None,
-        "dropped_frames": dropped,
-        "output_hz": frames / elapsed,
-        "repeat_hz": repeats / elapsed,
-        "heartbeat_hz": beats / elapsed,
-        "datagrams": frames + beats,
-        "max_tracks": tracks_seen,
-        "tracks_p95": _percentile([float(c) for c in counts], 95) if counts else None,
-        "people": people,
-        "tracks_publish": str(config["node"].tracks_publish),
+        "dropped_frames": sum(
+            statuses[s].dropped - (before[s].dropped if s in before else 0)
+            for s in sensors
+            if s in statuses
+        ),
         "cpu_percent": sum(by_role.values()),
         "cpu_percent_by_role": by_role,
+    }
+
+
+def e2e_bench(overrides: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+    """The figures of ``optrack bench e2e`` (see the module docstring); ``overrides``:
+    stage values laid over the site's (to compare settings)."""
+    protocol = E2E_BENCH.create()
+    venue = venue_recording(
+        str(protocol.scenario), 0, float(protocol.venue_seconds)
+    )  # rendered once, then cached
+    recording = Recording(venue)
+    sensors = recording.sensor_ids
+    fps = [float(recording.sensors[s].fps or 0.0) for s in sensors]
+    receiver = _Receiver()
+    try:
+        with tempfile.TemporaryDirectory(prefix="optrack-bench-") as state:
+            values = _site_values(Path(venue), sensors, state, receiver.address, overrides)
+            config = load_node_config(None, values)
+            site = Site(config, headless=True)
+            receiver.start()
+            load_before = os.getloadavg()
+            info(
+                f"optrack bench e2e: {len(sensors)} sensors at {statistics.median(fps):g} Hz "
+                f"from {venue}; warm-up {float(protocol.warmup_s):g} s, then "
+                f"{float(protocol.seconds):g} s measured (load average {load_before[0]:.1f} "
+                f"on {os.cpu_count()} cores)"
+            )
+            try:
+                window = _measure(site, protocol, sensors)
+            finally:
+                site.stop()
+    finally:
+        receiver.close()
+    return {
+        **_datagram_figures(receiver.arrivals, window),
+        "sensors": len(sensors),
+        "hz": statistics.median(fps),
+        **_node_figures(window, sensors),
+        "people": _people(recording),
+        "tracks_publish": str(config["node"].tracks_publish),
         "cpu_cores": os.cpu_count(),
         "load_average_before": load_before[0],
-        "seconds": elapsed,
-        "restarts": restarts,
+        "seconds": window.elapsed,
+        "restarts": window.restarts,
         "recording": str(Path(venue)),
         "sensor_model": recording.sensors[sensors[0]].model,
     }
-    if args.json:
-        sys.stdout.write(json.dumps(result) + "\n")
-    else:
-        for key, value in result.items():
-            print(f"{key}: {value}", file=sys.stderr)
-    return 0

@@ -15,20 +15,19 @@ clock also counts time the core spent on others, so ``kinect2_fps_cpu``
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import time
+from typing import Any
 
-import cv2
 import numpy as np
 
-from optrack.cli import emit_json, info
+from optrack.bench.common import info, pin_to_one_core
 from optrack.params import Param, Schema, register
 from optrack.sim.render import RENDER_PARAMS
 from optrack.sim.world import Simulation
 
-__all__ = ["BENCH_PARAMS", "cmd_bench_sim", "measure_kinect2_fps"]
+__all__ = ["BENCH_PARAMS", "measure_kinect2_fps", "sim_bench"]
 
 BENCH_PARAMS = register(
     Schema(
@@ -43,36 +42,6 @@ BENCH_PARAMS = register(
         help="The simulator benchmark.",
     )
 )
-
-
-def _idle_ticks() -> dict[int, int]:
-    ticks = {}
-    with open("/proc/stat", encoding="ascii") as handle:
-        for line in handle:
-            name, *fields = line.split()
-            if name.startswith("cpu") and name != "cpu":
-                ticks[int(name[3:])] = int(fields[3]) + int(fields[4])  # idle + iowait
-    return ticks
-
-
-def pin_to_one_core(sample_seconds: float = 0.3) -> int | None:
-    """Restrict this process to the idlest core it may use (idle time sampled over
-    ``sample_seconds`` from /proc/stat) and OpenCV to one thread; returns the core
-    (None where the OS cannot pin)."""
-    if not hasattr(os, "sched_setaffinity"):
-        return None
-    allowed = sorted(os.sched_getaffinity(0))
-    core = allowed[0]
-    try:
-        before = _idle_ticks()
-        time.sleep(sample_seconds)
-        after = _idle_ticks()
-        core = max(allowed, key=lambda c: after.get(c, 0) - before.get(c, 0))
-    except (OSError, ValueError, IndexError):
-        pass
-    os.sched_setaffinity(0, {core})
-    cv2.setNumThreads(1)
-    return core
 
 
 def measure_kinect2_fps(runs: int, frames: int, warmup: int, people: int, scenario: str) -> dict:
@@ -124,7 +93,8 @@ def measure_kinect2_fps(runs: int, frames: int, warmup: int, people: int, scenar
     }
 
 
-def cmd_bench_sim(args: argparse.Namespace) -> int:
+def sim_bench() -> dict[str, Any]:
+    """The figures of ``optrack bench sim`` (see the module docstring)."""
     p = BENCH_PARAMS.create()
     core = pin_to_one_core()
     info(
@@ -137,8 +107,4 @@ def cmd_bench_sim(args: argparse.Namespace) -> int:
     result["core"] = core
     result["threads"] = 1
     result["load_average"] = round(os.getloadavg()[0], 2)
-    if getattr(args, "json", False):
-        emit_json(result)
-    else:
-        info(f"kinect2_fps {result['kinect2_fps']} (median of {result['runs_fps']}).")
-    return 0
+    return result

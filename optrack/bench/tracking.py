@@ -5,7 +5,7 @@
   30 Hz, so 300 updates a second), synthetic detections, default settings.
 * Peer comparison: our tracker and norfair's Kalman point tracker on the same
   detection streams, scored with the same CLEAR MOT (0.5 m). Streams are
-  synthetic scenes with known answers and, when the simulator is built, the
+  synthetic scenes with known answers and the
   detector's output on short simulated recordings of the ``crowd``,
   ``distance`` and ``occlusions`` scenarios (made once and cached, see
   :func:`bench_cache`). Our tracker runs at its defaults, one configuration for
@@ -34,12 +34,10 @@
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import itertools
 import os
 import statistics
-import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -48,10 +46,13 @@ from typing import Any
 import msgspec
 import numpy as np
 
+from optrack.bench.common import info
 from optrack.errors import UserError
 from optrack.evaluation.clear_mot import ClearMot, MotScore
 from optrack.evaluation.replay import replay
+from optrack.evaluation.run import Truth, detect_recording
 from optrack.evaluation.synthetic import SceneTruth, crowd_scene, render
+from optrack.recording import Recording
 from optrack.tracking.params import TRACKING_PARAMS
 from optrack.tracking.tracker import Tracker
 from optrack.types import DetectionBatch
@@ -60,9 +61,9 @@ __all__ = [
     "BenchError",
     "BenchStream",
     "bench_cache",
-    "cmd_bench_tracking",
     "run_norfair",
     "run_ours",
+    "tracking_bench",
 ]
 
 #: norfair settings searched (distance m, hit counter and delay in seconds of updates)
@@ -100,10 +101,6 @@ class BenchStream:
     def updates_per_second(self) -> float:
         span = self.batches[-1].stamp - self.batches[0].stamp if len(self.batches) > 1 else 1.0
         return len(self.batches) / max(span, 1e-9)
-
-
-def _info(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
 
 
 def _from_synthetic(
@@ -281,16 +278,11 @@ def _source_digest() -> str:
     return digest.hexdigest()[:10]
 
 
-def _sim_stream(scenario: str, sensors: int, seconds: float, seed: int) -> BenchStream | None:
-    """Detections of a short simulated recording, made once and cached; None without the
-    simulator or detector."""
-    try:
-        from optrack.evaluation.run import Truth, detect_recording
-        from optrack.recording import Recording
-        from optrack.sim.recorder import write_recording
-        from optrack.sim.world import Simulation
-    except ImportError:
-        return None
+def _sim_stream(scenario: str, sensors: int, seconds: float, seed: int) -> BenchStream:
+    """Detections of a short simulated recording, made once and cached."""
+    from optrack.sim.recorder import write_recording
+    from optrack.sim.world import Simulation
+
     digest = _source_digest()
     key = f"{scenario}-{sensors}s-{seconds:g}-seed{seed}-{digest}"
     folder = bench_cache() / key
@@ -304,12 +296,12 @@ def _sim_stream(scenario: str, sensors: int, seconds: float, seed: int) -> Bench
     if not batches_file.is_file():
         folder.mkdir(parents=True, exist_ok=True)
         if not (recording_dir / "manifest.yaml").is_file():
-            _info(f"bench tracking: simulating {scenario} ({seconds:g} s, {sensors} sensors) once")
+            info(f"bench tracking: simulating {scenario} ({seconds:g} s, {sensors} sensors) once")
             sim = Simulation(scenario, seed=seed, sensors=sensors, seconds=seconds)
             write_recording(sim, recording_dir)
         recording = Recording(recording_dir)
         poses = {s: np.asarray(i.world_T_camera) for s, i in recording.sensors.items()}
-        _info(f"bench tracking: detecting people in {key} once")
+        info(f"bench tracking: detecting people in {key} once")
         batches = list(detect_recording(recording, poses))
         batches_file.write_bytes(msgspec.msgpack.encode(batches))
     recording = Recording(recording_dir)
@@ -371,7 +363,7 @@ def _compare(
 ) -> dict[str, Any]:
     """Per stream: ours, norfair's oracle setting (``norfair``) and its single setting
     (``norfair_single``); the single setting itself and its mean MOTA come under the key
-    ``_single``, which :func:`cmd_bench_tracking` takes out."""
+    ``_single``, which :func:`tracking_bench` takes out."""
     out: dict[str, Any] = {}
     ours_scores: dict[str, MotScore] = {}
     grid = _norfair_grid(min_confidence)
@@ -410,7 +402,7 @@ def _compare(
             entry["better_tuned_than_norfair"] = _better(tuned, theirs)
             line += f"; ours (tuned) MOTA {tuned.mota:.3f}, {tuned.idsw} switches"
         out[stream.name] = entry
-        _info(line)
+        info(line)
     if norfair_ok and streams:
         k = single_setting(all_runs)
         for stream, runs in zip(streams, all_runs, strict=True):
@@ -418,7 +410,7 @@ def _compare(
             theirs, theirs_ms = runs[k]
             entry["norfair_single"] = _tuned_entry(theirs, theirs_ms, grid[k])
             entry["better_than_norfair_single"] = _better(ours_scores[stream.name], theirs)
-            _info(
+            info(
                 f"bench tracking: {stream.name}: norfair (single setting) MOTA "
                 f"{theirs.mota:.3f}, {theirs.idsw} switches"
             )
@@ -429,8 +421,8 @@ def _compare(
     return out
 
 
-def cmd_bench_tracking(args: argparse.Namespace) -> int:
-    """The ``optrack bench tracking`` command."""
+def tracking_bench() -> dict[str, Any]:
+    """The figures of ``optrack bench tracking`` (see the module docstring)."""
     result: dict[str, Any] = {}
     result.update(speed_20x10())
     try:
@@ -445,9 +437,7 @@ def cmd_bench_tracking(args: argparse.Namespace) -> int:
     min_confidence = float(TRACKING_PARAMS.create().min_confidence_initialization)
     streams = _synthetic_streams(seed=1)
     for scenario, sensors, seconds in SIM_SCENES:
-        stream = _sim_stream(scenario, sensors, seconds, seed=1)
-        if stream is not None:
-            streams.append(stream)
+        streams.append(_sim_stream(scenario, sensors, seconds, seed=1))
     scenarios = _compare(streams, min_confidence, norfair_ok)
     single = scenarios.pop("_single", None)
     result["scenarios"] = scenarios
@@ -472,10 +462,4 @@ def cmd_bench_tracking(args: argparse.Namespace) -> int:
         if single is not None:
             result["norfair_single_setting"] = single["settings"]
             result["norfair_single_mean_mota"] = single["mean_mota"]
-    if getattr(args, "json", False):
-        from optrack.cli import emit_json
-
-        emit_json(result)
-    else:
-        _info(f"median update with 20 people and 10 sensors: {result['ms_per_update_20x10']} ms")
-    return 0
+    return result

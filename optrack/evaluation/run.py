@@ -1,4 +1,4 @@
-"""``optrack eval RECORDING``: detect and track a recording, score it against its ground truth.
+"""Detect and track a recording, score it against its ground truth (``optrack eval``).
 
 Every frame of every sensor goes through that sensor's people detector (in
 the world frame: the recording's true poses, or ``--calibration``), the
@@ -12,7 +12,6 @@ sensor (that sensor's batches alone, same tracker settings).
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 import time
@@ -23,7 +22,6 @@ from typing import Any
 import numpy as np
 import yaml
 
-from optrack.cli import emit_json, info
 from optrack.errors import UserError
 from optrack.evaluation.clear_mot import ClearMot, MotScore
 from optrack.evaluation.replay import replay
@@ -33,7 +31,7 @@ from optrack.tracking import APPEARANCE_PARAMS, SMOOTHING_PARAMS, TRACKING_PARAM
 from optrack.tracking.smoothing import OutputSmoother
 from optrack.types import DetectionBatch
 
-__all__ = ["EVALUATION_PARAMS", "EvalError", "Truth", "cmd_eval", "detect_recording", "score"]
+__all__ = ["EVALUATION_PARAMS", "EvalError", "Truth", "detect_recording", "evaluate", "score"]
 
 EVALUATION_PARAMS = register(
     Schema(
@@ -212,43 +210,48 @@ def _rounded(score: MotScore) -> dict[str, Any]:
     return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in score.as_dict().items()}
 
 
-def cmd_eval(args: argparse.Namespace) -> int:
-    """The ``optrack eval`` command."""
-    recording = Recording(args.recording)
+def evaluate(
+    path: str | Path,
+    calibration: str | None = None,
+    config_file: str | None = None,
+    appearance: str | None = None,
+    progress: bool = False,
+) -> tuple[dict[str, Any], MotScore]:
+    """Every frame of the recording at ``path`` detected, tracked and scored (see the
+    module docstring): the figures ``optrack eval`` reports, and the overall score.
+    ``calibration``: a calibration file (default: the recording's true poses);
+    ``config_file``: a YAML parameter file; ``appearance``: auto, on or off (default:
+    the config's)."""
+    recording = Recording(path)
     if not recording.has_ground_truth:
         raise EvalError(
             f"recording {recording.path} has no ground truth to score against; make one with "
             "'optrack sim' or give a recording that has ground_truth.jsonl."
         )
-    config = _config(args.config)
-    tracking = _create(TRACKING_PARAMS, config.get("tracking", {}), args.config)
-    appearance = _create(APPEARANCE_PARAMS, config.get("appearance", {}), args.config)
-    smoothing = _create(SMOOTHING_PARAMS, config.get("smoothing", {}), args.config)
-    evaluation = _create(EVALUATION_PARAMS, config.get("evaluation", {}), args.config)
-    if getattr(args, "appearance", None):
-        tracking.appearance = args.appearance
-    poses = _poses(recording, args.calibration)
+    config = _config(config_file)
+    tracking = _create(TRACKING_PARAMS, config.get("tracking", {}), config_file)
+    appearance_params = _create(APPEARANCE_PARAMS, config.get("appearance", {}), config_file)
+    smoothing = _create(SMOOTHING_PARAMS, config.get("smoothing", {}), config_file)
+    evaluation = _create(EVALUATION_PARAMS, config.get("evaluation", {}), config_file)
+    if appearance:
+        tracking.appearance = appearance
+    poses = _poses(recording, calibration)
     sensors = recording.sensor_ids
     truth = Truth.from_instants(list(recording.ground_truth()), sensors)
     if not len(truth.times):
         raise EvalError(f"recording {recording.path} has an empty ground truth file.")
 
     started = time.perf_counter()
-    batches = list(
-        detect_recording(recording, poses, config.get("detection"), progress=not args.json)
-    )
+    batches = list(detect_recording(recording, poses, config.get("detection"), progress=progress))
     detect_s = time.perf_counter() - started
     started = time.perf_counter()
-    overall, tracker, ms_per_update = score(
-        batches, truth, sensors, tracking, appearance, smoothing, evaluation, len(sensors)
-    )
+    settings = (tracking, appearance_params, smoothing, evaluation, len(sensors))
+    overall, tracker, ms_per_update = score(batches, truth, sensors, *settings)
     track_s = time.perf_counter() - started
     per_sensor = {}
     if len(sensors) > 1:
         for sid in sensors:
-            alone, _, _ = score(
-                batches, truth, [sid], tracking, appearance, smoothing, evaluation, len(sensors)
-            )
+            alone, _, _ = score(batches, truth, [sid], *settings)
             per_sensor[sid] = _rounded(alone)
     else:
         per_sensor[sensors[0]] = _rounded(overall)
@@ -266,16 +269,6 @@ def cmd_eval(args: argparse.Namespace) -> int:
         "detection_ms": round(float(np.median([b.processing_ms for b in batches])), 2)
         if batches
         else 0.0,
-        "calibration": args.calibration or "recording",
+        "calibration": calibration or "recording",
     }
-    if args.json:
-        emit_json(result)
-    else:
-        info(
-            f"{recording.path}: MOTA {overall.mota:.3f}, MOTP {overall.motp:.3f} m, "
-            f"{overall.idsw} ID switches, {overall.fp} false positives, {overall.fn} misses "
-            f"over {overall.frames} frames ({result['fps']} frames/s)."
-        )
-        for sid, s in per_sensor.items():
-            info(f"  {sid}: MOTA {s['mota']:.3f}, {s['idsw']} ID switches")
-    return 0
+    return result, overall

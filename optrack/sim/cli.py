@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
-from optrack.cli import emit_json, info
-from optrack.params import load_config
-from optrack.sim.recorder import ProgressBar, write_recording
-from optrack.sim.world import Simulation
+from optrack.cli import add_json, emit_json, info
 
-__all__ = ["cmd_sim"]
+__all__ = ["add_commands", "cmd_sim"]
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
+    """Simulate a venue into a new recording with ground truth."""
+    from optrack.params import load_config
+    from optrack.sim.recorder import ProgressBar, write_recording
+    from optrack.sim.world import Simulation
+
     params = load_config(args.config) if getattr(args, "config", None) else None
     sim = Simulation(
         args.scenario,
@@ -56,3 +59,27 @@ def cmd_sim(args: argparse.Namespace) -> int:
             f"{sim.seconds:g} s of scenario '{sim.scenario.name}' (seed {sim.seed})."
         )
     return 0
+
+
+def add_commands(commands: Any, command: Any) -> None:
+    """Declare this package's commands on the ``optrack`` parser (see optrack/cli.py)."""
+    p = command(
+        "sim",
+        "Simulate a venue with walking people and write a recording with ground truth.",
+        "optrack.sim.cli:cmd_sim",
+    )
+    p.add_argument("scenario", help="scenario name or YAML file (resources/scenarios)")
+    p.add_argument("--out", required=True, help="output recording directory (must be new)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="random seed (the same seed gives the same recording)"
+    )
+    p.add_argument("--seconds", type=float, help="simulated duration, s (default: the scenario's)")
+    p.add_argument("--sensors", type=int, help="number of sensors (default: the scenario's)")
+    p.add_argument("--people", type=int, help="number of people (default: the scenario's)")
+    p.add_argument(
+        "--sensor-model",
+        choices=("kinect2", "kinect1", "sr4500", "stereo"),
+        help="sensor model for every sensor",
+    )
+    p.add_argument("--config", help="YAML parameter file (sim_* stages, e.g. sim_kinect1)")
+    add_json(p)

@@ -3,7 +3,7 @@ running the command, not asserted here)."""
 
 from __future__ import annotations
 
-from optrack.sim.bench import measure_kinect2_fps
+from optrack.bench.sim import measure_kinect2_fps
 
 
 def test_bench_renders_kinect2_depth_and_infrared_of_seven_people():

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-from optrack.evaluation.clear_mot import MotScore
-from optrack.evaluation.synthetic import crowd_scene, render
-from optrack.tracking.bench import (
+from optrack.bench.tracking import (
     OURS_GRID,
     BenchStream,
     _compare,
@@ -15,6 +13,8 @@ from optrack.tracking.bench import (
     single_setting,
     speed_20x10,
 )
+from optrack.evaluation.clear_mot import MotScore
+from optrack.evaluation.synthetic import crowd_scene, render
 from optrack.tracking.params import TRACKING_PARAMS
 
 

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from optrack.calibration.bench import opencv_stereo_pose
+from optrack.bench.calibration import opencv_stereo_pose
 from optrack.calibration.board import Checkerboard
 from optrack.calibration.intrinsics import calibrate_intrinsics, corners_from_images
 from optrack.calibration.network import (

@@ -1,4 +1,4 @@
-"""``optrack detect`` on bad input says one sentence and fails; ``bench detection`` reports."""
+"""``optrack detect`` on bad input says one sentence and fails."""
 
 from __future__ import annotations
 
@@ -7,8 +7,7 @@ import json
 import cv2
 import numpy as np
 
-from optrack.cli import BENCHES, EXIT_ERROR, main
-from optrack.detection.bench import real_frame_figures
+from optrack.cli import EXIT_ERROR, main
 from optrack.io.pcd import write_pcd
 
 INTRINSICS = ["--intrinsics", "525,525,319.5,239.5"]
@@ -78,18 +77,3 @@ def test_depth_image_with_colour_is_detected(shared_data, capsys):
     assert main([*argv, "--ground=0.065,-0.691,-0.720,0.712"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["detections"] == []  # a laptop and a box on the floor: nobody
-
-
-def test_bench_real_frame_figures_meet_pcls_answers(shared_data):
-    # The whole bench also simulates and times minutes of frames: that is for
-    # `optrack bench detection`, not for the test suite.
-    result = real_frame_figures(shared_data)
-    assert result["five_people_ms"] > 0 and result["five_people_ms_cpu"] > 0
-    assert result["five_people_count"] == 5 and result["five_people_count_pcl_ground"] == 5
-    assert result["five_people_max_error_m"] < 0.2
-    assert result["ground_angle_deg"] < 3 and result["ground_offset_m"] < 0.05
-    assert result["office1_count"] == 0
-
-
-def test_bench_detection_is_registered():
-    assert BENCHES["detection"] == "optrack.detection.bench:bench_detection"

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from optrack.bench.detection import PCL_GROUND
 from optrack.detection import detection_params
-from optrack.detection.bench import PCL_GROUND
 from optrack.detection.ground import (
     GroundError,
     GroundEstimator,

@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
+from optrack.bench.detection import PCL_GROUND, PCL_PEOPLE_XZ, match_people
 from optrack.cli import EXIT_ERROR, main
-from optrack.detection.bench import PCL_GROUND, PCL_PEOPLE_XZ, match_people
 from optrack.detection.ground import check_ground
 
 INTRINSICS = ["--intrinsics", "525,525,319.5,239.5"]

@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
+from optrack.bench.detection import PCL_GROUND, PCL_PEOPLE_XZ, match_people
 from optrack.cli import main
 from optrack.detection import PeopleDetector, detection_params
-from optrack.detection.bench import PCL_GROUND, PCL_PEOPLE_XZ, match_people
 from optrack.detection.ground import check_ground, ground_T_camera
 from optrack.geometry import transform_points
 from optrack.types import RGBDFrame

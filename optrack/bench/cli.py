@@ -1,0 +1,135 @@
+"""``optrack bench WHAT``: measure one part of optrack and print its figures.
+
+Each ``cmd_bench_<what>`` runs the benchmark of :mod:`optrack.bench` named
+``<what>`` (imported only when it runs) and prints one JSON object on stdout
+with ``--json``, a short summary on stderr without.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterable
+from typing import Any
+
+from optrack.cli import EXIT_OK, add_json, emit_json, info
+
+__all__ = [
+    "BENCHES",
+    "add_commands",
+    "cmd_bench",
+    "cmd_bench_calibration",
+    "cmd_bench_detection",
+    "cmd_bench_e2e",
+    "cmd_bench_sim",
+    "cmd_bench_tracking",
+]
+
+
+def _report(args: argparse.Namespace, result: dict[str, Any], summary: Iterable[str]) -> int:
+    """The figures as one JSON object (``--json``), else the summary's lines on stderr."""
+    if getattr(args, "json", False):
+        emit_json(result)
+    else:
+        for line in summary:
+            info(line)
+    return EXIT_OK
+
+
+def cmd_bench_sim(args: argparse.Namespace) -> int:
+    """How fast the simulator renders Kinect v2 frames on one core."""
+    from optrack.bench.sim import sim_bench
+
+    result = sim_bench()
+    return _report(
+        args, result, [f"kinect2_fps {result['kinect2_fps']} (median of {result['runs_fps']})."]
+    )
+
+
+def cmd_bench_detection(args: argparse.Namespace) -> int:
+    """Speed and accuracy of the people detector."""
+    from optrack.bench.detection import detection_bench
+
+    result = detection_bench()
+    return _report(args, result, (f"  {key}: {value}" for key, value in result.items()))
+
+
+def cmd_bench_tracking(args: argparse.Namespace) -> int:
+    """Speed of the tracker, and accuracy against norfair."""
+    from optrack.bench.tracking import tracking_bench
+
+    result = tracking_bench()
+    line = f"median update with 20 people and 10 sensors: {result['ms_per_update_20x10']} ms"
+    return _report(args, result, [line])
+
+
+def _calibration_summary(payload: dict[str, Any]) -> list[str]:
+    from optrack.bench.calibration import OPENCV_FX
+
+    lines = [
+        f"global solve {payload['ba_seconds_10x300']:.2f} s (10 sensors x 300 views); "
+        f"live feedback {payload['feedback_hz']:.1f} Hz; refinement "
+        f"{payload['refinement_error_before_m'] * 100:.1f} -> "
+        f"{payload['refinement_error_after_m'] * 100:.1f} cm"
+    ]
+    if payload.get("stereo_baseline_m") is not None:
+        lines.append(
+            f"OpenCV's images: left fx {payload['intrinsics_left_fx']:.2f} "
+            f"({payload['intrinsics_left_fx_error_pct']:.2f} % from {OPENCV_FX}); stereo "
+            f"baseline {payload['stereo_baseline_m'] * 1000:.3f} mm "
+            f"({payload['stereo_baseline_error_pct']:.4f} % from cv2.stereoCalibrate), "
+            f"rotation {payload['stereo_rotation_error_deg']:.4f} deg from it"
+        )
+        lines.append(
+            f"replica of OpenCV's board, true fx {payload['intrinsics_replica_true_fx']:.2f}: "
+            f"ours {payload['intrinsics_replica_fx_error_pct']:+.3f} %, OpenCV's sample "
+            f"method {payload['intrinsics_replica_fx_error_pct_opencv_sample']:+.3f} %"
+        )
+    return lines
+
+
+def cmd_bench_calibration(args: argparse.Namespace) -> int:
+    """Speed (and accuracy) of the network solver."""
+    from optrack.bench.calibration import calibration_bench
+
+    result = calibration_bench()
+    return _report(args, result, _calibration_summary(result))
+
+
+def cmd_bench_e2e(args: argparse.Namespace) -> int:
+    """Frame timestamp to UDP datagram, on this computer."""
+    from optrack.bench.e2e import e2e_bench
+    from optrack.runtime.process import setup_logging
+
+    setup_logging("optrack bench e2e")
+    result = e2e_bench()
+    return _report(args, result, (f"{key}: {value}" for key, value in result.items()))
+
+
+#: ``optrack bench WHAT``: each benchmark's handler.
+BENCHES = {
+    "sim": cmd_bench_sim,
+    "detection": cmd_bench_detection,
+    "tracking": cmd_bench_tracking,
+    "calibration": cmd_bench_calibration,
+    "e2e": cmd_bench_e2e,
+}
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    """The ``optrack bench`` command: the handler of the benchmark asked for."""
+    return BENCHES[args.what](args)
+
+
+def add_commands(commands: Any, command: Any) -> None:
+    """Declare this package's commands on the ``optrack`` parser (see optrack/cli.py)."""
+    p = command(
+        "bench",
+        "Measure speed, memory and accuracy of one part of optrack.",
+        "optrack.bench.cli:cmd_bench",
+    )
+    p.add_argument(
+        "what",
+        choices=tuple(BENCHES),
+        help="what to measure",
+    )
+    add_json(p)
