@@ -102,7 +102,7 @@ class CalibrationFile(msgspec.Struct, forbid_unknown_fields=True):
     board: BoardEntry | None = None
     world: str = "floor"
     ground: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 0.0)
-    quality: dict[str, float | int | str | None] = {}
+    quality: dict[str, float | int | str | list[str] | None] = {}
     notes: str = ""
 
     def pose(self, sensor_id: str) -> np.ndarray:

@@ -1,6 +1,11 @@
-"""How far a calibration is from the truth (simulated recordings, synthetic sessions).
+"""A calibration's quality: the figures it was made with, and how far it is from the truth.
 
-A calibration is only defined up to the choice of world frame, so camera
+:class:`CalibrationQuality` is the typed form of a calibration file's
+``quality`` section as the live calibration writes it and the wizard's
+review page reads it back.
+
+Against the truth (simulated recordings, synthetic sessions): a calibration
+is only defined up to the choice of world frame, so camera
 poses are compared after the rigid transform that best maps the estimated
 network onto the true one (rotation: the chordal mean of the per-camera
 rotation offsets; translation: the camera centroids). The ground plane is
@@ -12,12 +17,45 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from typing import Any
 
+import msgspec
 import numpy as np
 
 from optrack.geometry import Plane, invert, make_pose, rotation_angle_deg
 
-__all__ = ["CalibrationErrors", "align_networks", "calibration_errors"]
+__all__ = ["CalibrationErrors", "CalibrationQuality", "align_networks", "calibration_errors"]
+
+
+class CalibrationQuality(msgspec.Struct, kw_only=True):
+    """How a calibration was made: its reprojection RMS (px) over every view, the still
+    board instants and floor views it used, where its world is (``floor`` or ``none``), and
+    after a walk's refinement (Algorithm 1) the sensors' disagreement on the walker before
+    and after (m) and the sensors whose correction was refused (they kept the
+    checkerboard's pose)."""
+
+    reprojection_rms_px: float | None = None
+    instants: int | None = None
+    floor_views: int = 0
+    ground: str = "none"
+    refinement_error_before_m: float | None = None
+    refinement_error_after_m: float | None = None
+    refinement_refused: list[str] = msgspec.field(default_factory=list)
+
+    @property
+    def refined(self) -> bool:
+        return self.refinement_error_after_m is not None
+
+    def as_dict(self) -> dict[str, Any]:
+        """The file's ``quality`` section: the figures that are known."""
+        return {k: v for k, v in msgspec.structs.asdict(self).items() if v not in (None, [])}
+
+    @classmethod
+    def of(cls, quality: Mapping[str, Any]) -> CalibrationQuality:
+        """The figures of a file's ``quality`` section (other keys, which other commands
+        write, are left out)."""
+        known = {f: quality[f] for f in cls.__struct_fields__ if f in quality}
+        return msgspec.convert(known, cls, strict=False)
 
 
 def align_networks(

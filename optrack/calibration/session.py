@@ -1,12 +1,14 @@
 """A recorded checkerboard session turned into a network calibration.
 
 Frames are taken in time bins (``view_rate_hz``); in each bin every sensor
-contributes its first frame. The board is looked for in the image that
-belongs to the depth camera: the infrared image when the colour image is not
-registered to the depth (the pose that matters is the depth camera's), else
-the colour image. A view counts only while the board is held still in that
-sensor (corners moved less than ``max_motion_px`` since its previous bin), so
-that sensors whose clocks disagree slightly still see the same board pose.
+contributes its first frame, stamped with the bin's time. The board is looked
+for in the image that belongs to the depth camera: the infrared image when the
+colour image is not registered to the depth (the pose that matters is the
+depth camera's), else the colour image. A view counts only while the board is
+held still in that sensor (corners moved less than ``max_motion_px`` since its
+previous bin), so that sensors whose clocks disagree slightly still see the
+same board pose: the still-board rule of :mod:`optrack.calibration.still`,
+which the live calibration shares.
 
 A board lies on the floor when the depth around it (a ring beyond its printed
 border) is one surface whose median is in the board's plane (noise-tolerant:
@@ -34,6 +36,7 @@ from optrack.calibration.network import (
     NetworkResult,
     observe_board,
 )
+from optrack.calibration.still import StillBoard, StillBoards
 from optrack.errors import UserError
 from optrack.geometry import transform_points
 from optrack.params import Param, Params, Schema, register
@@ -263,6 +266,84 @@ class SessionResult:
     timeline: list[tuple[float, bool]]  # (time, on the floor) of every instant used
 
 
+def _floor_after(floor: str) -> float | None:
+    """``after:T`` as T; None for ``auto`` and ``none``; a SessionError for anything else."""
+    if floor.startswith("after:"):
+        try:
+            return float(floor.split(":", 1)[1])
+        except ValueError:
+            raise SessionError(
+                f"--floor must be auto, none or after:SECONDS; got '{floor}'."
+            ) from None
+    if floor not in ("auto", "none"):
+        raise SessionError(f"--floor must be auto, none or after:SECONDS; got '{floor}'.")
+    return None
+
+
+@dataclasses.dataclass
+class _BoardReader:
+    """Finds the board in one sensor's frame and, for ``depth_test``, tells whether it
+    lies on the floor (run on a worker thread: OpenCV releases the GIL)."""
+
+    recording: Recording
+    board: Checkerboard
+    usable: dict[str, tuple[str, Intrinsics]]
+    corner_params: Params
+    session_params: Params
+    thickness: float
+    depth_test: bool
+
+    def look(self, sid: str, entry: IndexEntry) -> tuple[np.ndarray | None, bool | None]:
+        """(corners or None, on the floor or None when the depth cannot tell) of one frame."""
+        kind, intrinsics = self.usable[sid]
+        frame = self.recording.load(sid, entry, (kind,))
+        image = frame.infrared if kind == "infrared" else frame.color
+        if image is None:
+            return None, None
+        corners = find_corners(image, self.board, self.corner_params, infrared=kind == "infrared")
+        registered = kind == "infrared" or self.recording.sensors[sid].color_intrinsics is None
+        if corners is None or not registered or not self.depth_test:
+            return corners, None
+        view = observe_board(sid, corners, intrinsics, self.board)
+        on_floor = board_on_floor(
+            view, frame.depth_m(), intrinsics, self.board, self.session_params, self.thickness
+        )
+        return corners, on_floor
+
+
+@dataclasses.dataclass
+class _Tally:
+    """Feeds still boards to the calibrator and counts what went in."""
+
+    calibrator: NetworkCalibrator
+    floor_after: float | None
+    report: Callable[[str], None]
+    detections: dict[str, int]
+    start: float = 0.0
+    instants: int = 0
+    floor_instants: int = 0
+    timeline: list[tuple[float, bool]] = dataclasses.field(default_factory=list)
+
+    def feed(self, still: StillBoard) -> None:
+        t = still.end
+        if self.floor_after is not None:
+            is_floor = t - self.start >= self.floor_after
+        else:
+            is_floor = still.on_floor()
+        for sid in still.corners:
+            self.detections[sid] += 1
+        feedback = self.calibrator.add(still.corners, floor=is_floor)
+        self.timeline.append((t, is_floor))
+        self.instants += 1
+        self.floor_instants += int(is_floor)
+        calibrated = sum(1 for st in feedback.sensors.values() if st.calibrated)
+        self.report(
+            f"t={t - self.start:6.1f} s: board seen by {', '.join(sorted(still.corners))}"
+            f"{' (on the floor)' if is_floor else ''}; {calibrated}/{len(feedback.sensors)} "
+            "sensors calibrated"
+        )
+
+
 def calibrate_recording(
     recording: Recording,
     board: Checkerboard,
@@ -283,17 +364,7 @@ def calibrate_recording(
     sp = session_params if session_params is not None else SESSION_PARAMS.create()
     np_ = network_params if network_params is not None else NETWORK_PARAMS.create()
     cp = corner_params if corner_params is not None else CORNER_PARAMS.create()
-    floor_after: float | None = None
-    if floor.startswith("after:"):
-        try:
-            floor_after = float(floor.split(":", 1)[1])
-        except ValueError:
-            raise SessionError(
-                f"--floor must be auto, none or after:SECONDS; got '{floor}'."
-            ) from None
-    elif floor not in ("auto", "none"):
-        raise SessionError(f"--floor must be auto, none or after:SECONDS; got '{floor}'.")
-    thickness = float(np_.board_thickness)
+    floor_after = _floor_after(floor)
     chosen = {sid: pick_image(info, str(sp.image)) for sid, info in recording.sensors.items()}
     usable = {sid: c for sid, c in chosen.items() if c is not None}
     if not usable:
@@ -307,86 +378,40 @@ def calibrate_recording(
         np_,
         fixed_poses={s: p for s, p in (fixed_poses or {}).items() if s in usable} or None,
     )
-    previous: dict[str, np.ndarray] = {}
-    detections = dict.fromkeys(usable, 0)
-    instants = floor_instants = 0
-    timeline: list[tuple[float, bool]] = []
-    start: float | None = None
-    report = progress or (lambda message: None)
-
-    def look(sid: str, entry: IndexEntry) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """(corners, depth in metres when it is registered to the image) of one frame."""
-        kind, _ = usable[sid]
-        frame = recording.load(sid, entry, (kind,))
-        image = frame.infrared if kind == "infrared" else frame.color
-        if image is None:
-            return None, None
-        corners = find_corners(image, board, cp, infrared=(kind == "infrared"))
-        registered = kind == "infrared" or recording.sensors[sid].color_intrinsics is None
-        depth = frame.depth_m() if corners is not None and registered else None
-        return corners, depth
-
+    reader = _BoardReader(
+        recording, board, usable, cp, sp, float(np_.board_thickness), floor == "auto"
+    )
+    tally = _Tally(
+        calibrator, floor_after, progress or (lambda message: None), dict.fromkeys(usable, 0)
+    )
+    grouper = StillBoards(usable, float(sp.max_motion_px))
     workers = max(1, min(len(usable), os.cpu_count() or 1))
-    with concurrent.futures.ThreadPoolExecutor(workers) as pool:  # OpenCV releases the GIL
-        for bin_entries in _bins(recording, float(sp.view_rate_hz)):
-            found: dict[str, np.ndarray] = {}
-            on_floor_votes: list[bool] = []
+    with concurrent.futures.ThreadPoolExecutor(workers) as pool:
+        for index, bin_entries in enumerate(_bins(recording, float(sp.view_rate_hz))):
             t = min(e.t for e in bin_entries.values())
-            start = t if start is None else start
-            chosen = sorted(sid for sid in bin_entries if sid in usable)
-            looked = pool.map(look, chosen, [bin_entries[sid] for sid in chosen])
-            for sid, (corners, depth) in zip(chosen, looked, strict=True):
-                if corners is None:
-                    previous.pop(sid, None)
-                    continue
-                moved = (
-                    float(np.sqrt(np.mean(np.sum((corners - previous[sid]) ** 2, axis=1))))
-                    if sid in previous
-                    else math.inf
-                )
-                previous[sid] = corners
-                if sp.max_motion_px > 0 and moved > sp.max_motion_px:
-                    continue
-                detections[sid] += 1
-                found[sid] = corners
-                if floor == "auto" and depth is not None:
-                    view = observe_board(sid, corners, usable[sid][1], board)
-                    on_floor_votes.append(
-                        board_on_floor(view, depth, usable[sid][1], board, sp, thickness)
-                    )
-            if not found:
-                continue
-            if floor_after is not None:
-                is_floor = t - start >= floor_after
-            elif floor == "auto":
-                is_floor = bool(on_floor_votes) and sum(on_floor_votes) * 2 > len(on_floor_votes)
-            else:
-                is_floor = False
-            feedback = calibrator.add(found, floor=is_floor)
-            timeline.append((t, is_floor))
-            instants += 1
-            floor_instants += int(is_floor)
-            calibrated = sum(1 for st in feedback.sensors.values() if st.calibrated)
-            report(
-                f"t={t - start:6.1f} s: board seen by {', '.join(sorted(found))}"
-                f"{' (on the floor)' if is_floor else ''}; {calibrated}/{len(feedback.sensors)} "
-                "sensors calibrated"
-            )
-    if instants == 0:
+            tally.start = t if index == 0 else tally.start
+            searched = sorted(sid for sid in bin_entries if sid in usable)
+            looked = pool.map(reader.look, searched, [bin_entries[sid] for sid in searched])
+            for sid, (corners, on_floor) in zip(searched, looked, strict=True):
+                grouper.add(sid, t, corners, on_floor)
+            for still in grouper.ready():
+                tally.feed(still)
+    for still in grouper.ready(final=True):
+        tally.feed(still)
+    if tally.instants == 0:
         raise SessionError(
             f"the {board.cols}x{board.rows} board was not found held still in any frame of "
             f"{recording.path}; check --board and --square, and that the board is visible and lit."
         )
-    network = calibrator.solve()
     return SessionResult(
-        network=network,
+        network=calibrator.solve(),
         board=board,
         intrinsics=dict(calibrator.intrinsics),
         image={sid: c[0] for sid, c in usable.items()},
-        instants=instants,
-        floor_instants=floor_instants,
-        detections=detections,
-        timeline=timeline,
+        instants=tally.instants,
+        floor_instants=tally.floor_instants,
+        detections=tally.detections,
+        timeline=tally.timeline,
     )
 
 
