@@ -1,0 +1,783 @@
+"""``optrack calibrate ...``: intrinsics, stereo, network, refine, ground, board, export, truth.
+
+Each handler takes the parsed arguments and returns an exit code; with
+``--json`` it prints one JSON object on stdout, and progress goes to stderr.
+The handlers read the arguments, call the package's maths (intrinsics.py,
+stereo.py, session.py, ground.py, refinement.py, ...) and write the files;
+:func:`add_commands` declares the whole ``calibrate`` command tree. Imports
+of the maths stay inside the handlers, so that building the parser is quick.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from optrack.cli import CommandError, _usage, add_json, emit_json, info
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from optrack.calibration.board import Checkerboard
+    from optrack.calibration.files import CalibrationFile
+    from optrack.params import Params
+
+__all__ = [
+    "add_commands",
+    "cmd_calibrate_board",
+    "cmd_calibrate_export",
+    "cmd_calibrate_ground",
+    "cmd_calibrate_intrinsics",
+    "cmd_calibrate_network",
+    "cmd_calibrate_refine",
+    "cmd_calibrate_stereo",
+    "cmd_calibrate_truth",
+]
+
+
+def _board(args: argparse.Namespace) -> Checkerboard:
+    from optrack.calibration.board import Checkerboard
+
+    return Checkerboard.parse(args.board, args.square)
+
+
+# ------------------------------------------------------------------ intrinsics
+
+
+def cmd_calibrate_intrinsics(args: argparse.Namespace) -> int:
+    """Intrinsics of one camera from chessboard images."""
+    from optrack.calibration.intrinsics import calibrate_intrinsics, corners_from_images
+    from optrack.params import load_config
+
+    board = _board(args)
+    config = load_config(args.config) if getattr(args, "config", None) else {}
+    found, size = corners_from_images(
+        args.images, board, infrared=args.infrared, params=config.get("calibration_corners")
+    )
+    views = [c for c in found if c is not None]
+    labels = [Path(p).name for p, c in zip(args.images, found, strict=True) if c is not None]
+    missing = [Path(p).name for p, c in zip(args.images, found, strict=True) if c is None]
+    if missing:
+        info(f"the {board.cols}x{board.rows} board was not found in: {', '.join(missing)}")
+    result = calibrate_intrinsics(views, board, size, config.get("calibration_intrinsics"))
+    payload = result.as_dict(labels)
+    payload["not_found"] = missing
+    if args.out:
+        _write_intrinsics(args.out, result)
+        payload["out"] = args.out
+    if args.json:
+        emit_json(payload)
+    else:
+        k = result.intrinsics
+        info(
+            f"fx={k.fx:.2f} fy={k.fy:.2f} cx={k.cx:.2f} cy={k.cy:.2f} dist={[round(float(v), 5) for v in k.dist]} "
+            f"RMS {result.rms:.3f} px over {len(result.used)} views"
+            + (
+                f"; rejected {', '.join(labels[i] for i in result.rejected)}"
+                if result.rejected
+                else ""
+            )
+            + f"; coverage {result.coverage.fraction:.0%} of the image"
+        )
+    return 0
+
+
+def _write_intrinsics(path: str, result: Any) -> None:
+    """The intrinsics (``--out``) as a small YAML file."""
+    import yaml
+
+    from optrack.io.files import atomic_write_text
+
+    k = result.intrinsics
+    atomic_write_text(
+        path,
+        yaml.safe_dump(
+            {
+                "fx": k.fx,
+                "fy": k.fy,
+                "cx": k.cx,
+                "cy": k.cy,
+                "width": k.width,
+                "height": k.height,
+                "dist": list(k.dist),
+                "rms_px": result.rms,
+                "views": len(result.used),
+            },
+            sort_keys=False,
+        ),
+    )
+
+
+# ---------------------------------------------------------------------- stereo
+
+
+def cmd_calibrate_stereo(args: argparse.Namespace) -> int:
+    """Relative pose of a stereo pair from chessboard image pairs."""
+    from optrack.calibration.intrinsics import corners_from_images
+    from optrack.calibration.stereo import stereo_calibrate
+
+    board = _board(args)
+    if len(args.left) != len(args.right):
+        raise CommandError(
+            f"--left lists {len(args.left)} images but --right {len(args.right)}; give the "
+            "pairs in the same order."
+        )
+    left, size = corners_from_images(args.left, board)
+    right, right_size = corners_from_images(args.right, board)
+    if size != right_size:
+        raise CommandError(
+            f"left images are {size[0]}x{size[1]} but right ones {right_size[0]}x{right_size[1]}; "
+            "a stereo pair needs both at one resolution."
+        )
+    payload = stereo_calibrate(left, right, board, size)
+    if args.json:
+        emit_json(payload)
+    else:
+        info(
+            f"baseline {payload['baseline_m'] * 1000:.2f} mm, rotation {payload['rotation_deg']:.3f} "
+            f"deg, RMS {payload['rms']:.3f} px over {payload['pairs']} pairs"
+        )
+    return 0
+
+
+# --------------------------------------------------------------------- network
+
+
+def _network_params(args: argparse.Namespace) -> Params:
+    from optrack.calibration.network import NETWORK_PARAMS
+
+    overrides: dict[str, Any] = {}
+    if getattr(args, "board_thickness", None) is not None:
+        overrides["board_thickness"] = args.board_thickness
+    return NETWORK_PARAMS.create(overrides)
+
+
+def _recording_board(args: argparse.Namespace, recording: Any) -> Checkerboard:
+    from optrack.calibration.session import board_from_recording
+
+    if args.board or args.square is not None:
+        if not (args.board and args.square is not None):
+            raise CommandError("give both --board CxR and --square M (or neither).")
+        return _board(args)
+    board = board_from_recording(recording)
+    if board is None:
+        raise CommandError(
+            f"recording {recording.path} does not say which checkerboard was used; give "
+            "--board CxR (inner corners) and --square M."
+        )
+    return board
+
+
+def cmd_calibrate_network(args: argparse.Namespace) -> int:
+    """Calibrate every sensor of a recorded checkerboard session."""
+    from optrack.calibration.files import save_calibration
+    from optrack.calibration.session import calibrate_recording
+    from optrack.calibration.truth import floor_view_errors
+    from optrack.recording import Recording
+
+    recording = Recording(args.recording)
+    board = _recording_board(args, recording)
+    params = _network_params(args)
+    session = calibrate_recording(
+        recording, board, floor=args.floor, network_params=params, progress=info
+    )
+    network = session.network
+    calibration = _network_file(recording, board, params, session)
+    backup = save_calibration(args.out, calibration)
+    if network.uncalibrated:
+        info(
+            f"not calibrated (never shared a board view with a calibrated sensor): "
+            f"{', '.join(network.uncalibrated)}"
+        )
+    if network.world != "floor":
+        info(
+            "no board was seen lying on the floor, so the world frame is the camera "
+            f"{network.root}'s; lay the board on the floor and run 'optrack calibrate ground'."
+        )
+    payload = _network_payload(args.out, backup, calibration.id, session)
+    payload.update(floor_view_errors(recording, session.timeline))
+    payload.update(_network_truth(recording, network))
+    if args.json:
+        emit_json(payload)
+    else:
+        info(
+            f"wrote {args.out}: {len(calibration.sensors)} sensors, RMS {network.rms_px:.3f} px, "
+            f"{network.floor_views} floor views, world: {network.world}"
+        )
+        if "max_position_error_m" in payload:
+            info(
+                f"against the truth: position {payload['max_position_error_m'] * 100:.2f} cm, "
+                f"rotation {payload['max_rotation_error_deg']:.3f} deg"
+            )
+    return 0
+
+
+def _network_file(recording: Any, board: Checkerboard, params: Params, session: Any) -> Any:
+    """The calibration file of a solved session (every calibrated sensor)."""
+    from optrack.calibration.files import (
+        BoardEntry,
+        CalibrationFile,
+        SensorEntry,
+        new_calibration_id,
+        now_iso,
+    )
+    from optrack.types import as_matrix4
+
+    network = session.network
+    sensors = {}
+    for sid, pose in network.world_T_camera.items():
+        status = network.sensors[sid]
+        sensors[sid] = SensorEntry(
+            world_T_camera=as_matrix4(pose),
+            intrinsics=session.intrinsics[sid],
+            model=recording.sensors[sid].model,
+            image=session.image.get(sid, ""),
+            views=status.used_views,
+            reprojection_rms_px=status.rms_px,
+        )
+    if not sensors:
+        raise CommandError("no sensor could be calibrated.")
+    return CalibrationFile(
+        sensors=sensors,
+        id=new_calibration_id(),
+        created=now_iso(),
+        board=BoardEntry(board.cols, board.rows, board.square, float(params.board_thickness)),
+        world=network.world,
+        quality={
+            "reprojection_rms_px": network.rms_px,
+            "instants": session.instants,
+            "floor_views": network.floor_views,
+            "ground": "floor" if network.world == "floor" else "none",
+        },
+        notes=f"from recording {recording.path}",
+    )
+
+
+def _network_payload(out: str, backup: Path | None, file_id: str, session: Any) -> dict[str, Any]:
+    """``calibrate network``'s JSON: the file written and the solve's figures."""
+    from optrack.types import as_matrix4
+
+    network = session.network
+    return {
+        "out": str(out),
+        "backup": str(backup) if backup else None,
+        "id": file_id,
+        "world": network.world,
+        "sensors": {
+            sid: {
+                "world_T_camera": as_matrix4(network.world_T_camera[sid]),
+                "views": network.sensors[sid].used_views,
+                "rms_px": network.sensors[sid].rms_px,
+                "image": session.image.get(sid, ""),
+            }
+            for sid in sorted(network.world_T_camera)
+        },
+        "uncalibrated": network.uncalibrated,
+        "rms_px": network.rms_px,
+        "instants": session.instants,
+        "floor_views": network.floor_views,
+        "detections": session.detections,
+        "solve_seconds": network.seconds,
+    }
+
+
+def _network_truth(recording: Any, network: Any) -> dict[str, Any]:
+    """The solved poses against the recording's true ones (none without ground truth); the
+    ground's error only when the world frame is the floor."""
+    from optrack.calibration.quality import calibration_errors
+    from optrack.calibration.truth import true_poses
+
+    truth = true_poses(recording)
+    if not truth:
+        return {}
+    errors = calibration_errors(network.world_T_camera, truth).as_dict()
+    if network.world == "floor":
+        return errors
+    return {k: v for k, v in errors.items() if not k.startswith("ground_error")}
+
+
+# ---------------------------------------------------------------------- ground
+
+
+def cmd_calibrate_ground(args: argparse.Namespace) -> int:
+    """Set the world frame: from boards on the floor in a recording, or from points of
+    known world coordinates."""
+    from optrack.calibration.files import (
+        load_calibration,
+        new_calibration_id,
+        now_iso,
+        save_calibration,
+    )
+    from optrack.calibration.ground import frame_change, world_from_points
+    from optrack.recording import Recording
+
+    calibration = load_calibration(args.calibration)
+    recording = Recording(args.recording) if args.recording else None
+    details: dict[str, Any]
+    if args.points:
+        transform, rms, count = world_from_points(Path(args.points), calibration, recording)
+        details = {"points": count, "points_rms_m": rms}
+        world = "points"
+    elif recording is not None:
+        transform, details = _floor_from_recording(args, calibration, recording)
+        world = "floor"
+    else:
+        raise CommandError(
+            "give a RECORDING with the board lying on the floor, or --points FILE with points "
+            "of known world coordinates."
+        )
+    poses = {sid: transform @ entry.pose for sid, entry in calibration.sensors.items()}
+    updated = calibration.with_poses(
+        poses,
+        id=new_calibration_id(),
+        created=now_iso(),
+        world=world,
+        quality={**calibration.quality, **details, "ground": world},
+    )
+    backup = save_calibration(args.out, updated)
+    payload = {
+        "out": str(args.out),
+        "backup": str(backup) if backup else None,
+        "world": world,
+        **frame_change(transform),
+        **details,
+    }
+    if args.json:
+        emit_json(payload)
+    else:
+        info(
+            f"wrote {args.out}: world from the {world}; the floor tilted by "
+            f"{payload['tilt_change_deg']:.3f} deg"
+        )
+    return 0
+
+
+def _floor_from_recording(
+    args: argparse.Namespace, calibration: CalibrationFile, recording: Any
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """new_world_T_world from boards lying on the floor: the calibration's board unless
+    ``--board`` names one."""
+    from optrack.calibration.board import Checkerboard
+    from optrack.calibration.ground import floor_from_recording
+
+    if calibration.board is not None and not args.board:
+        board = Checkerboard(
+            calibration.board.cols, calibration.board.rows, calibration.board.square
+        )
+    else:
+        board = _recording_board(args, recording)
+    return floor_from_recording(
+        recording,
+        calibration,
+        board,
+        floor=args.floor,
+        network_params=_network_params(args),
+        progress=info,
+        where=f"file {args.calibration}",
+    )
+
+
+# ---------------------------------------------------------------------- refine
+
+
+def cmd_calibrate_refine(args: argparse.Namespace) -> int:
+    """Refine a calibration from one person walking (Algorithm 1)."""
+    from optrack.calibration.commands import person_trajectories
+    from optrack.calibration.files import load_calibration, save_calibration
+    from optrack.calibration.refinement import REFINEMENT_PARAMS, refine_from_trajectories
+    from optrack.recording import Recording
+
+    recording = Recording(args.recording)
+    calibration = load_calibration(args.calibration)
+    calibration.require(recording.sensor_ids, f"file {args.calibration}")
+    params = REFINEMENT_PARAMS.create({"dof": args.dof})
+    trajectories, crowded = person_trajectories(recording, calibration, args.rate, info)
+    for sid, frames in sorted(crowded.items()):
+        info(
+            f"{sid}: more than one person in {frames} frames; refinement wants exactly one "
+            "person walking (the most confident detection was used)."
+        )
+    result = refine_from_trajectories(trajectories, params)
+    refined = _refined_file(calibration, result, recording)
+    backup = save_calibration(args.out, refined)
+    payload = _refine_payload(args.out, backup, result, trajectories)
+    payload.update(_refine_truth(recording, calibration, refined, result.corrections))
+    if args.json:
+        emit_json(payload)
+    else:
+        info(
+            f"wrote {args.out}: mean distance between sensors' detections "
+            f"{result.error_before_m * 100:.1f} cm -> {result.error_after_m * 100:.1f} cm"
+        )
+    return 0
+
+
+def _refined_file(calibration: CalibrationFile, result: Any, recording: Any) -> CalibrationFile:
+    """The calibration with each refined sensor's correction applied (and accumulated in
+    its ``refinement``)."""
+    import numpy as np
+
+    from optrack.calibration.files import CalibrationFile, SensorEntry, new_calibration_id, now_iso
+    from optrack.types import as_matrix4
+
+    sensors = dict(calibration.sensors)
+    for sid, correction in result.corrections.items():
+        entry = sensors[sid]
+        previous = (
+            np.asarray(entry.refinement, dtype=np.float64)
+            if entry.refinement is not None
+            else np.eye(4)
+        )
+        sensors[sid] = SensorEntry(
+            world_T_camera=as_matrix4(correction @ entry.pose),
+            intrinsics=entry.intrinsics,
+            model=entry.model,
+            image=entry.image,
+            refinement=as_matrix4(correction @ previous),
+            views=entry.views,
+            reprojection_rms_px=entry.reprojection_rms_px,
+        )
+    return CalibrationFile(
+        sensors=sensors,
+        id=new_calibration_id(),
+        created=now_iso(),
+        board=calibration.board,
+        world=calibration.world,
+        ground=calibration.ground,
+        quality={
+            **calibration.quality,
+            "refinement_error_before_m": result.error_before_m,
+            "refinement_error_after_m": result.error_after_m,
+        },
+        notes=f"refined from {calibration.id} with recording {recording.path}",
+    )
+
+
+def _refine_payload(
+    out: str, backup: Path | None, result: Any, trajectories: dict[str, Any]
+) -> dict[str, Any]:
+    """``calibrate refine``'s JSON: the file written, the errors, each correction."""
+    import numpy as np
+
+    from optrack.types import as_matrix4
+
+    return {
+        "out": str(out),
+        "backup": str(backup) if backup else None,
+        "error_before_m": result.error_before_m,
+        "error_after_m": result.error_after_m,
+        "error_before_xyz_m": result.error_before_xyz_m,
+        "error_after_xyz_m": result.error_after_xyz_m,
+        "detections": {sid: len(tr.t) for sid, tr in trajectories.items()},
+        "refined": sorted(result.corrections),
+        "skipped": result.skipped,
+        "corrections": {
+            sid: {
+                "translation_m": float(np.linalg.norm(c[:3, 3])),
+                "matrix": as_matrix4(c),
+            }
+            for sid, c in result.corrections.items()
+        },
+    }
+
+
+def _refine_truth(
+    recording: Any, before: CalibrationFile, after: CalibrationFile, refined: Any
+) -> dict[str, Any]:
+    """The refined sensors' errors against the recording's true poses, before and after
+    (none without ground truth)."""
+    from optrack.calibration.quality import calibration_errors
+    from optrack.calibration.truth import true_poses
+
+    truth = true_poses(recording)
+    if not truth:
+        return {}
+    return {
+        "truth_before": calibration_errors(
+            {sid: before.sensors[sid].pose for sid in refined}, truth
+        ).as_dict(),
+        "truth_after": calibration_errors(
+            {sid: after.sensors[sid].pose for sid in refined}, truth
+        ).as_dict(),
+    }
+
+
+# ----------------------------------------------------------------------- truth
+
+
+def cmd_calibrate_truth(args: argparse.Namespace) -> int:
+    """Write a recording's true sensor poses as a calibration file, optionally perturbed
+    (to measure refinement, or to track with a known calibration)."""
+    from optrack.calibration.files import (
+        CalibrationFile,
+        SensorEntry,
+        new_calibration_id,
+        now_iso,
+        save_calibration,
+    )
+    from optrack.calibration.synthetic import perturb_poses
+    from optrack.calibration.truth import recorded_poses
+    from optrack.recording import Recording
+    from optrack.types import as_matrix4
+
+    recording = Recording(args.recording)
+    truth = recorded_poses(recording)
+    if not truth:
+        raise CommandError(
+            f"recording {recording.path} does not know its sensors' poses; only simulated "
+            "recordings (or ones recorded with a calibration) do."
+        )
+    translation = rotation = 0.0
+    if args.perturb:
+        try:
+            translation, rotation = (float(v) for v in args.perturb.split(","))
+        except ValueError:
+            raise CommandError(
+                f"--perturb must be METRES,DEGREES, e.g. 0.1,2; got '{args.perturb}'."
+            ) from None
+        truth = perturb_poses(truth, translation, rotation, seed=args.seed)
+    sensors = {
+        sid: SensorEntry(
+            world_T_camera=as_matrix4(pose),
+            intrinsics=recording.sensors[sid].intrinsics,
+            model=recording.sensors[sid].model,
+        )
+        for sid, pose in truth.items()
+    }
+    calibration = CalibrationFile(
+        sensors=sensors,
+        id=new_calibration_id(),
+        created=now_iso(),
+        world="floor",
+        quality={"perturbation_m": translation, "perturbation_deg": rotation},
+        notes=f"true poses of recording {recording.path}"
+        + (f", each moved {translation} m and turned {rotation} deg" if args.perturb else ""),
+    )
+    backup = save_calibration(args.out, calibration)
+    if args.json:
+        emit_json(
+            {
+                "out": str(args.out),
+                "backup": str(backup) if backup else None,
+                "sensors": sorted(sensors),
+            }
+        )
+    else:
+        info(f"wrote {args.out}: the true poses of {len(sensors)} sensors ({calibration.notes})")
+    return 0
+
+
+# ----------------------------------------------------------------------- board
+
+
+def cmd_calibrate_board(args: argparse.Namespace) -> int:
+    """Write a printable checkerboard (PDF or PNG)."""
+    from optrack.calibration.printable import board_label, save_printable_board
+
+    board = _board(args)
+    page = save_printable_board(args.out, board, args.paper, args.dpi)
+    payload = {
+        "out": str(args.out),
+        "cols": board.cols,
+        "rows": board.rows,
+        "square": board.square,
+        "page_mm": [round(page[0], 1), round(page[1], 1)],
+        "label": board_label(board),
+    }
+    if args.json:
+        emit_json(payload)
+    else:
+        info(f"wrote {args.out} ({page[0]:.0f} x {page[1]:.0f} mm): {board.describe()}")
+    return 0
+
+
+# ---------------------------------------------------------------------- export
+
+
+def cmd_calibrate_export(args: argparse.Namespace) -> int:
+    """Export a calibration file as OpenPTrack's camera_poses.yaml or ROS static transforms."""
+    from optrack.calibration.files import (
+        CalibrationFileError,
+        load_calibration,
+        openptrack_camera_poses,
+        ros_static_transforms,
+    )
+    from optrack.io.files import atomic_write_text
+
+    calibration = load_calibration(args.calibration)
+    if args.format == "openptrack":
+        text = openptrack_camera_poses(calibration)
+    elif args.format == "ros":
+        text = ros_static_transforms(calibration, args.parent)
+    else:  # argparse's choices keep this unreachable from the command line
+        raise CalibrationFileError(f"unknown export format '{args.format}'.")
+    atomic_write_text(args.out, text)
+    if args.json:
+        emit_json(
+            {"out": str(args.out), "format": args.format, "sensors": sorted(calibration.sensors)}
+        )
+    else:
+        info(f"wrote {args.out} ({args.format}, {len(calibration.sensors)} sensors)")
+    return 0
+
+
+# -------------------------------------------------------------------- commands
+
+
+def add_commands(commands: Any, command: Any) -> None:
+    """Declare ``optrack calibrate`` and its steps on the ``optrack`` parser (see
+    optrack/cli.py); each step's handler is named ``cmd_calibrate_<step>``."""
+    p = commands.add_parser(
+        "calibrate",
+        help="Calibrate intrinsics, stereo pairs and the camera network.",
+        description="Calibrate intrinsics, stereo pairs and the camera network.",
+    )
+    p.set_defaults(handler=lambda a: _usage(p))
+    calibrate = p.add_subparsers(dest="calibrate_command", metavar="STEP")
+    q = command(
+        "intrinsics",
+        "Intrinsics of one camera from chessboard images.",
+        "optrack.calibration.cli:cmd_calibrate_intrinsics",
+        calibrate,
+    )
+    q.add_argument("images", nargs="+", help="chessboard images")
+    q.add_argument("--board", required=True, help="inner corners, columns x rows, e.g. 9x6")
+    q.add_argument("--square", type=float, required=True, help="square size, m")
+    q.add_argument(
+        "--infrared", action="store_true", help="infrared images (equalised, upsampled if small)"
+    )
+    q.add_argument("--out", help="also write the intrinsics to this YAML file")
+    q.add_argument(
+        "--config", help="YAML parameter file (calibration_corners, calibration_intrinsics)"
+    )
+    add_json(q)
+    q = command(
+        "stereo",
+        "Relative pose of a stereo pair from chessboard image pairs.",
+        "optrack.calibration.cli:cmd_calibrate_stereo",
+        calibrate,
+    )
+    q.add_argument("--board", required=True, help="inner corners, columns x rows, e.g. 9x6")
+    q.add_argument("--square", type=float, required=True, help="square size, m")
+    q.add_argument("--left", nargs="+", required=True, help="left images")
+    q.add_argument("--right", nargs="+", required=True, help="right images (same order)")
+    add_json(q)
+    q = command(
+        "network",
+        "Calibrate every sensor of a recording (checkerboard, ground).",
+        "optrack.calibration.cli:cmd_calibrate_network",
+        calibrate,
+    )
+    q.add_argument("recording", help="recording of the checkerboard session")
+    q.add_argument("--out", required=True, help="calibration file to write")
+    q.add_argument("--board", help="inner corners CxR (default: the recording's board)")
+    q.add_argument("--square", type=float, help="square size, m (default: the recording's)")
+    q.add_argument(
+        "--board-thickness", type=float, help="board face above the floor when laid on it, m"
+    )
+    q.add_argument(
+        "--floor",
+        default="auto",
+        help="which views lie on the floor: auto (depth test), none, after:SECONDS",
+    )
+    add_json(q)
+    q = command(
+        "refine",
+        "Refine a calibration from one person walking.",
+        "optrack.calibration.cli:cmd_calibrate_refine",
+        calibrate,
+    )
+    q.add_argument("recording", help="recording of one person walking")
+    q.add_argument("--calibration", required=True, help="calibration file to refine")
+    q.add_argument("--out", required=True, help="refined calibration file to write")
+    q.add_argument(
+        "--rate", type=float, default=10.0, help="frames per second run through the detector"
+    )
+    q.add_argument(
+        "--dof",
+        choices=("full", "heading"),
+        default="full",
+        help="full: also level each camera's tilt (Algorithm 1); heading: keep the tilts",
+    )
+    add_json(q)
+    q = command(
+        "ground",
+        "Set the world frame: boards lying on the floor, or points of known coordinates.",
+        "optrack.calibration.cli:cmd_calibrate_ground",
+        calibrate,
+    )
+    q.add_argument("recording", nargs="?", help="recording with the board on the floor")
+    q.add_argument("--calibration", required=True, help="calibration file to update")
+    q.add_argument("--out", required=True, help="calibration file to write")
+    q.add_argument("--points", help="YAML file of points with known world coordinates")
+    q.add_argument("--board", help="inner corners CxR (default: the calibration's board)")
+    q.add_argument("--square", type=float, help="square size, m")
+    q.add_argument(
+        "--board-thickness", type=float, help="board face above the floor when laid on it, m"
+    )
+    q.add_argument("--floor", default="auto", help="views on the floor: auto, all, after:SECONDS")
+    add_json(q)
+    q = command(
+        "board",
+        "Write a printable checkerboard (PDF or PNG) with its size printed on it.",
+        "optrack.calibration.cli:cmd_calibrate_board",
+        calibrate,
+    )
+    q.add_argument("--board", default="9x6", help="inner corners, columns x rows (default 9x6)")
+    q.add_argument("--square", type=float, default=0.1, help="square size, m (default 0.1)")
+    q.add_argument("--out", required=True, help="output .pdf or .png")
+    q.add_argument("--paper", default="fit", help="fit, a4, a3, a2, a1, a0 or letter")
+    q.add_argument("--dpi", type=int, default=300, help="PNG resolution (default 300)")
+    add_json(q)
+    q = command(
+        "export",
+        "Export a calibration as OpenPTrack's camera_poses.yaml or ROS static transforms.",
+        "optrack.calibration.cli:cmd_calibrate_export",
+        calibrate,
+    )
+    q.add_argument("calibration", help="calibration file")
+    q.add_argument("--format", required=True, choices=("openptrack", "ros"), help="what to write")
+    q.add_argument("--out", required=True, help="file to write")
+    q.add_argument("--parent", default="world", help="ROS parent frame (default world)")
+    add_json(q)
+    q = command(
+        "truth",
+        "Write a recording's true sensor poses as a calibration file (optionally perturbed).",
+        "optrack.calibration.cli:cmd_calibrate_truth",
+        calibrate,
+    )
+    q.add_argument("recording", help="simulated recording (it knows its sensors' poses)")
+    q.add_argument("--out", required=True, help="calibration file to write")
+    q.add_argument("--perturb", metavar="M,DEG", help="move each sensor M metres, turn it DEG")
+    q.add_argument("--seed", type=int, default=0, help="seed of the perturbation's directions")
+    add_json(q)
+    q = command(
+        "live",
+        "The calibration wizard without a window: extrinsics, floor, refinement on a running site.",
+        "optrack.runtime.cli:cmd_calibrate_live",
+        calibrate,
+    )
+    q.add_argument("--site", help="site name (default: the config's site.name)")
+    q.add_argument("--board", default="6x5", help="inner corners CxR (default 6x5)")
+    q.add_argument("--square", type=float, default=0.2, help="square size, m (default 0.2)")
+    q.add_argument("--out", required=True, help="calibration file to write")
+    q.add_argument("--config", help="YAML parameter file (bus, calibration_live, ...)")
+    q.add_argument(
+        "--extrinsics-seconds", type=float, default=120.0, help="longest extrinsics phase, s"
+    )
+    q.add_argument(
+        "--min-views", type=int, default=3, help="extrinsics end when every sensor has this many"
+    )
+    q.add_argument("--floor-seconds", type=float, default=60.0, help="longest floor phase, s")
+    q.add_argument(
+        "--floor-views", type=int, default=3, help="the floor phase ends at this many floor views"
+    )
+    q.add_argument(
+        "--refine-seconds",
+        type=float,
+        default=0.0,
+        help="seconds of one person walking for the refinement (0: no refinement)",
+    )
+    q.add_argument("--no-publish", action="store_true", help="save only; do not send to the nodes")
+    add_json(q)
