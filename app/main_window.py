@@ -52,6 +52,30 @@ class MainWindow(QMainWindow):
         self.setWindowTitle(f"optrack {__version__}")
         self.resize(1280, 800)
         self.view_params = VIEW_PARAMS.create()
+        self._panels()
+        self._arrange_docks()
+        self.site_label = QLabel(NO_SITE)
+        self.site_label.setAlignment(Qt.AlignmentFlag.AlignLeft)
+        self.statusBar().addWidget(self.site_label)
+        self.progress_label = QLabel("")
+        self.statusBar().addPermanentWidget(self.progress_label)
+        self._menus()
+        self._connect_panels()
+
+        self.calibration: NetworkCalibration | None = None
+        self._connections: list[tuple[Any, Any]] = []
+        self._site_clouds: set[str] = set()
+        self._stage_reporter: dict[str, str] = {}
+        self._max_depth: dict[str, float] = {}  # each sensor's detection.max_distance, m
+        self.embedded_site: EmbeddedSite | None = None
+        self.wizard = None  # the calibration wizard, once opened (Calibration menu)
+        self._site_stop_timeout_s = 0.0
+        self._waiting_text = ""
+        self._shutting_down = False
+        self.source = SiteSource(self)
+        self.set_source(source if source is not None else self.source)
+
+    def _panels(self) -> None:
         view = self.view_params
         self.world = WorldView(
             trail_seconds=view.trail_seconds, track_radius=view.track_radius, parent=self
@@ -64,6 +88,10 @@ class MainWindow(QMainWindow):
         self.log_panel = LogPanel(max_lines=view.log_lines)
         self.outputs = OutputsPanel()
         self.recording = RecordingPanel()
+
+    def _arrange_docks(self) -> None:
+        """Sensors, Parameters and Recording (tabs, left), Top view over Tracks (right), Log
+        and Outputs (tabs, bottom)."""
         self.docks: dict[str, QDockWidget] = {}
         left, right, bottom = (
             Qt.DockWidgetArea.LeftDockWidgetArea,
@@ -92,15 +120,13 @@ class MainWindow(QMainWindow):
         self.resizeDocks([self.docks["Log"]], [150], Qt.Orientation.Vertical)
         self.setCorner(Qt.Corner.BottomRightCorner, right)
         self.setCorner(Qt.Corner.BottomLeftCorner, left)
-        self.site_label = QLabel(NO_SITE)
-        self.site_label.setAlignment(Qt.AlignmentFlag.AlignLeft)
-        self.statusBar().addWidget(self.site_label)
-        self.progress_label = QLabel("")
-        self.statusBar().addPermanentWidget(self.progress_label)
-        self._menus()
 
+    def _connect_panels(self) -> None:
+        """The panels' requests go to the window's source (whichever it is by then)."""
         self.parameters.set_schemas(node_schemas())
-        self.parameters.set_schemas({"view": VIEW_PARAMS}, {"view": view.as_dict()}, local=True)
+        self.parameters.set_schemas(
+            {"view": VIEW_PARAMS}, {"view": self.view_params.as_dict()}, local=True
+        )
         self.parameters.changed.connect(self._parameters_changed)
         self.parameters.problem.connect(lambda text: self.log_panel.append("warning", text))
         self.outputs.add_requested.connect(
@@ -123,19 +149,6 @@ class MainWindow(QMainWindow):
         self.log_handler.message.connect(self.log_panel.append)
         for name in ("optrack", "app"):
             logging.getLogger(name).addHandler(self.log_handler)
-
-        self.calibration: NetworkCalibration | None = None
-        self._connections: list[tuple[Any, Any]] = []
-        self._site_clouds: set[str] = set()
-        self._stage_reporter: dict[str, str] = {}
-        self._max_depth: dict[str, float] = {}  # each sensor's detection.max_distance, m
-        self.embedded_site: EmbeddedSite | None = None
-        self.wizard = None  # the calibration wizard, once opened (Calibration menu)
-        self._site_stop_timeout_s = 0.0
-        self._waiting_text = ""
-        self._shutting_down = False
-        self.source = SiteSource(self)
-        self.set_source(source if source is not None else self.source)
 
     def _dock(self, title: str, widget: QWidget, area: Qt.DockWidgetArea) -> None:
         dock = QDockWidget(title, self)

@@ -89,7 +89,21 @@ class RecordingPanel(QWidget):
         self.recording_path = ""
         self._last_take = ""  # what the last recording became, once stopped
 
-        # ---------------------------------------------------------- record
+        record_box = self._record_box()
+        play_box = self._play_box()
+
+        self.message = QLabel("")
+        self.message.setWordWrap(True)
+        self.message.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        layout = QVBoxLayout(self)
+        layout.addWidget(record_box)
+        layout.addWidget(play_box)
+        layout.addWidget(self.message)
+        layout.addStretch(1)
+        self._update_controls()
+
+    def _record_box(self) -> QGroupBox:
+        """Record the sensors: the folder, Record/Stop, each sensor's counts and problems."""
         record_box = QGroupBox("Record the sensors")
         self.folder = QLineEdit(default_take_folder())
         self.folder.setToolTip(
@@ -133,8 +147,10 @@ class RecordingPanel(QWidget):
         record_layout.addLayout(button_row)
         record_layout.addWidget(self.table)
         record_layout.addWidget(self.problems)
+        return record_box
 
-        # -------------------------------------------------------- playback
+    def _play_box(self) -> QGroupBox:
+        """Play a recording through the site: open, pause, step, speed, position, rates."""
         play_box = QGroupBox("Play a recording through the site")
         self.source_label = QLabel("Live sensors: nothing to play.")
         self.source_label.setWordWrap(True)
@@ -179,16 +195,7 @@ class RecordingPanel(QWidget):
         play_layout.addLayout(source_row)
         play_layout.addLayout(controls)
         play_layout.addWidget(self.rates)
-
-        self.message = QLabel("")
-        self.message.setWordWrap(True)
-        self.message.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
-        layout = QVBoxLayout(self)
-        layout.addWidget(record_box)
-        layout.addWidget(play_box)
-        layout.addWidget(self.message)
-        layout.addStretch(1)
-        self._update_controls()
+        return play_box
 
     # ------------------------------------------------------- operator's intent
     def _ask_folder(self) -> None:
