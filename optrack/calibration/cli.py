@@ -383,9 +383,12 @@ def _floor_from_recording(
 
 def cmd_calibrate_refine(args: argparse.Namespace) -> int:
     """Refine a calibration from one person walking (Algorithm 1)."""
-    from optrack.calibration.commands import person_trajectories
     from optrack.calibration.files import load_calibration, save_calibration
-    from optrack.calibration.refinement import REFINEMENT_PARAMS, refine_from_trajectories
+    from optrack.calibration.refinement import (
+        REFINEMENT_PARAMS,
+        person_trajectories,
+        refine_from_trajectories,
+    )
     from optrack.recording import Recording
 
     recording = Recording(args.recording)

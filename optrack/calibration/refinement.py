@@ -36,7 +36,8 @@ time.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import open3d as o3d
@@ -50,7 +51,9 @@ __all__ = [
     "Trajectory",
     "alignment_error",
     "average_trajectory",
+    "person_trajectories",
     "refine_from_trajectories",
+    "walker_trajectory",
 ]
 
 REFINEMENT_PARAMS = register(
@@ -377,3 +380,72 @@ def alignment_error(
     if not distances:
         return float("nan")
     return float(np.mean(np.concatenate(distances)))
+
+
+def walker_trajectory(
+    frames: Iterable[tuple[float, Sequence[Any]]], world_T_camera: np.ndarray
+) -> tuple[Trajectory | None, int]:
+    """One sensor's detections of the one person walking as a trajectory in the world:
+    for each frame ``(time, detections)``, the most confident detection that has a
+    camera-frame centroid (``camera_xyz``), moved by ``world_T_camera``. Returns the
+    trajectory (None when the person was never detected) and how many frames had more
+    than one person."""
+    pose = np.asarray(world_T_camera, dtype=np.float64)
+    times: list[float] = []
+    points: list[np.ndarray] = []
+    crowded = 0
+    for t, detections in frames:
+        found = [d for d in detections if d.camera_xyz is not None]
+        crowded += len(found) > 1
+        if not found:
+            continue
+        best = max(found, key=lambda d: d.confidence)
+        times.append(float(t))
+        points.append(pose[:3, :3] @ np.asarray(best.camera_xyz, dtype=np.float64) + pose[:3, 3])
+    if not times:
+        return None, crowded
+    return Trajectory(np.asarray(times), np.asarray(points)), crowded
+
+
+def person_trajectories(
+    recording: Any,
+    calibration: Any,
+    rate_hz: float,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[dict[str, Trajectory], dict[str, int]]:
+    """Each sensor's detections of the one person walking through a recording (the
+    people detector run on its frames, at most ``rate_hz`` a second), in the world of
+    ``calibration`` (a CalibrationFile; :func:`walker_trajectory`). Returns
+    (trajectories, frames with more than one person, per sensor)."""
+    try:
+        from optrack.detection.params import detection_params
+        from optrack.detection.pipeline import PeopleDetector
+    except ImportError as error:
+        raise RefinementError(
+            f"the people detector is not available in this optrack ({error}); refinement needs it."
+        ) from None
+
+    trajectories: dict[str, Trajectory] = {}
+    crowded: dict[str, int] = {}
+    for sid in recording.sensor_ids:
+        info = recording.sensors[sid]
+        pose = calibration.sensors[sid].pose
+        detector = PeopleDetector(detection_params(info.model), sensor_id=sid, world_T_camera=pose)
+
+        def frames(sid: str = sid, detector: Any = detector) -> Iterable[tuple[float, Any]]:
+            last = -np.inf
+            for entry in recording.index(sid):
+                if entry.t - last < 1.0 / rate_hz - 1e-6:
+                    continue
+                last = entry.t
+                yield entry.t, detector.process(recording.load(sid, entry)).detections
+
+        trajectory, many = walker_trajectory(frames(), pose)
+        if many:
+            crowded[sid] = many
+        if trajectory is not None:
+            trajectories[sid] = trajectory
+        if progress:
+            count = 0 if trajectory is None else len(trajectory.t)
+            progress(f"{sid}: the person was detected in {count} frames")
+    return trajectories, crowded
