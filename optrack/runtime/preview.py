@@ -16,7 +16,7 @@ import numpy as np
 
 from optrack.geometry import backproject_points, transform_points
 from optrack.net.messages import PreviewMessage
-from optrack.types import DetectionBatch, Matrix4, RGBDFrame
+from optrack.types import DetectionBatch, Matrix4, RGBDFrame, as_matrix4
 
 __all__ = ["decode_preview", "make_preview"]
 
@@ -69,7 +69,7 @@ def make_preview(
         if world_T_camera is not None:
             xyz = transform_points(world_T_camera, xyz)
             cloud_frame = "world"
-            pose = tuple(tuple(float(v) for v in row) for row in world_T_camera)  # type: ignore[assignment]
+            pose = as_matrix4(world_T_camera)
         cloud = np.ascontiguousarray(xyz, dtype=np.float16).tobytes()
     return PreviewMessage(
         sensor=frame.sensor_id,
