@@ -225,6 +225,7 @@ def _frames(args: argparse.Namespace) -> Iterator[tuple[RGBDFrame, Any]]:
         for frame in recording.frames(sensors):
             yield frame, recording.sensors[frame.sensor_id]
         return
+    import optrack.sim.sensor  # noqa: F401 - registers sim://
     from optrack.sensors import open_sensor
 
     with open_sensor(args.input) as sensor:

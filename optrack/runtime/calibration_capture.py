@@ -528,7 +528,7 @@ class SceneSwitch:
         if not uri:
             sensor = self.own
         else:
-            from optrack.sensors.simulated import SimulatedSensor
+            from optrack.sim.sensor import SimulatedSensor
 
             try:
                 sensor = SimulatedSensor.from_uri(uri)

@@ -119,6 +119,7 @@ def open_node_sensor(uri: str, config: NodeConfig, clock: Callable[[], float]) -
     """The sensor a detector node reads. A recording (``file://``) plays as a live camera
     on the node's clock (:class:`~optrack.runtime.replay.LiveReplay`); other URIs open
     through :func:`optrack.sensors.uri.open_sensor`."""
+    import optrack.sim.sensor  # noqa: F401 - registers sim://
     from optrack.runtime.replay import LiveReplay
     from optrack.sensors.uri import open_sensor, parse_uri
 

@@ -207,6 +207,7 @@ class Site:
         return paths
 
     def _children(self, uris: list[str], configs: dict[str, Path]) -> list[Child]:
+        import optrack.sim.sensor  # noqa: F401 - registers sim://
         from optrack.sensors.uri import parse_uri
 
         children = []

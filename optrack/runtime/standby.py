@@ -27,6 +27,7 @@ def preload() -> None:
     import optrack.runtime.process  # noqa: F401
     import optrack.runtime.tracker_node  # noqa: F401
     import optrack.sensors.uri  # noqa: F401
+    import optrack.sim.sensor  # noqa: F401
     import optrack.tracking  # noqa: F401
     from optrack.runtime.config import load_node_config
 

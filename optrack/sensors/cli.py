@@ -123,6 +123,7 @@ class _Capture(threading.Thread):
 
 def cmd_record(args: argparse.Namespace) -> int:
     """Record live sensors for ``--seconds`` into a new recording directory."""
+    import optrack.sim.sensor  # noqa: F401 - registers sim://
     from optrack.sensors.uri import open_sensor
 
     if not args.seconds > 0:

@@ -2,31 +2,44 @@
 
 ::
 
-    sim://<scenario>/<n>            sensor n (0-based) of a simulated scenario
     file://<recording>[#sensor]     a recording played back (path relative or absolute)
     openni://<serial|URI|Dummy>     an OpenNI2 camera (empty: the first attached)
     realsense://<serial>            an Intel RealSense camera (empty: the first attached)
+    sim://<scenario>/<n>            sensor n (0-based) of a simulated scenario
 
 Any URI may end in ``?name=value&...``: ``id`` sets the sensor id, other
 names set that backend's parameters (``openni://Dummy?color=false&fps=30``).
 :func:`open_sensor` returns the sensor opened; a URI naming nothing
 attached fails with one sentence that lists what is attached.
+
+Each scheme is registered with :func:`register_scheme`: this module registers
+the sources it has (``file``, ``openni``, ``realsense``); a source that lives
+in a package above this one registers itself when imported, so this module
+never imports it (``sim://`` comes with :mod:`optrack.sim.sensor`, which the
+command line and the runtime import before they open a URI).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import urllib.parse
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from optrack.params import ParamError, Params, Schema
 from optrack.recording import is_recording
 from optrack.sensors.base import Sensor, SensorError
 
-__all__ = ["SCHEMES", "SensorURI", "attached_summary", "open_sensor", "parse_uri"]
+__all__ = [
+    "Scheme",
+    "SensorURI",
+    "attached_summary",
+    "open_sensor",
+    "parse_uri",
+    "register_scheme",
+    "schemes",
+]
 
-SCHEMES = ("sim", "file", "openni", "realsense")
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
 
@@ -53,6 +66,52 @@ class SensorURI:
         return self.text
 
 
+#: Opens a parsed URI with the stages' parameters (``config``, maybe empty).
+Opener = Callable[[SensorURI, Mapping[str, Params]], Sensor]
+
+
+@dataclasses.dataclass(frozen=True)
+class Scheme:
+    """A kind of source of frames: its URIs' scheme, how one is written (for messages)
+    and what opens one."""
+
+    name: str
+    form: str
+    open: Opener
+
+
+_SCHEMES: dict[str, Scheme] = {}
+
+
+def register_scheme(name: str, form: str, opener: Opener) -> None:
+    """Open ``name://`` URIs with ``opener``; ``form`` shows how one is written, e.g.
+    ``sim://SCENARIO/N``. Registering a name again replaces its opener."""
+    _SCHEMES[name.lower()] = Scheme(name.lower(), form, opener)
+
+
+def schemes() -> tuple[str, ...]:
+    """The schemes that open, in the order they were registered."""
+    return tuple(_SCHEMES)
+
+
+def _forms() -> str:
+    forms = [scheme.form for scheme in _SCHEMES.values()]
+    return ", ".join(forms[:-1]) + " or " + forms[-1] if len(forms) > 1 else "".join(forms)
+
+
+def _scheme(name: str, text: str) -> Scheme:
+    """The registered scheme ``name`` of the URI ``text``, or one sentence naming those
+    that are."""
+    scheme = _SCHEMES.get(name)
+    if scheme is None:
+        raise SensorError(
+            f"sensor URI '{text}' has an unknown scheme '{name}'; use one of "
+            + ", ".join(f"{s}://" for s in _SCHEMES)
+            + "."
+        )
+    return scheme
+
+
 def parse_uri(text: str) -> SensorURI:
     """Split a sensor URI; a bare path to a recording counts as ``file://``."""
     text = str(text).strip()
@@ -60,17 +119,8 @@ def parse_uri(text: str) -> SensorURI:
     if not sep:
         if text and is_recording(text):
             return SensorURI("file", text, text=f"file://{text}")
-        raise SensorError(
-            f"'{text}' is not a sensor URI; use sim://SCENARIO/N, file://RECORDING[#SENSOR], "
-            "openni://SERIAL (or openni://Dummy) or realsense://SERIAL."
-        )
-    scheme = scheme.lower()
-    if scheme not in SCHEMES:
-        raise SensorError(
-            f"sensor URI '{text}' has an unknown scheme '{scheme}'; use one of "
-            + ", ".join(f"{s}://" for s in SCHEMES)
-            + "."
-        )
+        raise SensorError(f"'{text}' is not a sensor URI; use {_forms()}.")
+    scheme = _scheme(scheme.lower(), text).name
     rest, _, fragment = rest.partition("#")
     target, _, query_text = rest.partition("?")
     try:
@@ -137,34 +187,34 @@ def attached_summary() -> str:
     return "attached: " + ", ".join(f"{c.model} ({c.uri or 'not supported'})" for c in cameras)
 
 
-def _simulated(uri: SensorURI) -> Sensor:
-    from optrack.sensors.simulated import SimulatedSensor
+def _open_file(uri: SensorURI, config: Mapping[str, Params]) -> Sensor:
+    from optrack.sensors.playback import PLAYBACK_PARAMS, PlaybackSensor
 
-    return SimulatedSensor.from_uri(uri.text)
+    if not uri.target:
+        raise SensorError(f"sensor URI '{uri}' names no recording; write file://PATH[#SENSOR].")
+    params = _params(PLAYBACK_PARAMS, uri, config.get("playback"))
+    return PlaybackSensor(
+        uri.target, uri.fragment or None, params, uri=uri.text, sensor_id=uri.sensor_id
+    )
 
 
-def _build(uri: SensorURI, config: Mapping[str, Params] | None) -> Sensor:
-    config = config or {}
-    if uri.scheme == "sim":
-        return _simulated(uri)
-    if uri.scheme == "file":
-        from optrack.sensors.playback import PLAYBACK_PARAMS, PlaybackSensor
+def _open_openni(uri: SensorURI, config: Mapping[str, Params]) -> Sensor:
+    from optrack.sensors.openni import OPENNI_PARAMS, OpenNISensor
 
-        if not uri.target:
-            raise SensorError(f"sensor URI '{uri}' names no recording; write file://PATH[#SENSOR].")
-        params = _params(PLAYBACK_PARAMS, uri, config.get("playback"))
-        return PlaybackSensor(
-            uri.target, uri.fragment or None, params, uri=uri.text, sensor_id=uri.sensor_id
-        )
-    if uri.scheme == "openni":
-        from optrack.sensors.openni import OPENNI_PARAMS, OpenNISensor
+    params = _params(OPENNI_PARAMS, uri, config.get("openni"))
+    return OpenNISensor(uri.target, params, uri.sensor_id, uri=uri.text)
 
-        params = _params(OPENNI_PARAMS, uri, config.get("openni"))
-        return OpenNISensor(uri.target, params, uri.sensor_id, uri=uri.text)
+
+def _open_realsense(uri: SensorURI, config: Mapping[str, Params]) -> Sensor:
     from optrack.sensors.realsense import REALSENSE_PARAMS, RealSenseSensor
 
     params = _params(REALSENSE_PARAMS, uri, config.get("realsense"))
     return RealSenseSensor(uri.target, params, uri.sensor_id, uri=uri.text)
+
+
+register_scheme("file", "file://RECORDING[#SENSOR]", _open_file)
+register_scheme("openni", "openni://SERIAL (or openni://Dummy)", _open_openni)
+register_scheme("realsense", "realsense://SERIAL", _open_realsense)
 
 
 def open_sensor(uri: str | SensorURI, config: Mapping[str, Params] | None = None) -> Sensor:
@@ -174,6 +224,6 @@ def open_sensor(uri: str | SensorURI, config: Mapping[str, Params] | None = None
     returns them); the URI's query overrides them.
     """
     parsed = uri if isinstance(uri, SensorURI) else parse_uri(uri)
-    sensor = _build(parsed, config)
+    sensor = _scheme(parsed.scheme, parsed.text).open(parsed, config or {})
     sensor.open()
     return sensor

@@ -5,7 +5,7 @@ sensors and its people; :class:`~optrack.sim.world.Simulation` brings it to
 life deterministically for a seed and renders each sensor's frames by ray
 casting (:mod:`optrack.sim.render`) through a sensor model with real noise
 (:mod:`optrack.sim.models`). ``optrack sim`` writes it to a recording;
-:class:`optrack.sensors.simulated.SimulatedSensor` streams one sensor live.
+:class:`optrack.sim.sensor.SimulatedSensor` streams one sensor live.
 """
 
 from optrack.sim.models import MODELS, SensorModel, make_model

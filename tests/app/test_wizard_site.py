@@ -18,7 +18,7 @@ from app.wizard.widgets import COUNT_COLORS, count_level
 from optrack.calibration.files import load_calibration
 from optrack.calibration.quality import calibration_errors
 from optrack.calibration.session import pick_image
-from optrack.sensors.simulated import SimulatedSensor
+from optrack.sim.sensor import SimulatedSensor
 from optrack.sim.world import Simulation
 
 from .conftest import free_port

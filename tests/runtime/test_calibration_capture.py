@@ -24,7 +24,7 @@ from optrack.runtime.calibration_capture import (
 from optrack.runtime.config import NODE_PARAMS
 from optrack.runtime.node import CommandError, Node, send_command
 from optrack.runtime.site_params import SITE_PARAMS
-from optrack.sensors.simulated import SimulatedSensor
+from optrack.sim.sensor import SimulatedSensor
 from optrack.sim.world import Simulation
 
 BOARD = {"cols": 6, "rows": 5, "square": 0.15}

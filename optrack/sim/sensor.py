@@ -15,7 +15,9 @@ ground truth at the last frame's capture time.
 URI: ``sim://SCENARIO/N?seed=0&people=5&sensors=3&model=kinect1&seconds=60
 &realtime=false&noise=false&start=1700000000.0&id=cam0&hold=5`` (all optional; ``hold``:
 seconds the board operator holds the board still at each place);
-``sim:///abs/path/scenario.yaml/N`` for a scenario file.
+``sim:///abs/path/scenario.yaml/N`` for a scenario file. Importing this module
+registers the scheme with :func:`optrack.sensors.uri.register_scheme`, so that
+:func:`optrack.sensors.open_sensor` opens ``sim://`` URIs from then on.
 """
 
 from __future__ import annotations
@@ -23,11 +25,15 @@ from __future__ import annotations
 import math
 import time
 import urllib.parse
+from collections.abc import Mapping
 
 import msgspec
 
+from optrack.params import Params
 from optrack.recording.format import GroundTruth, SensorInfo
 from optrack.sensors.base import Sensor, SensorError
+from optrack.sensors.uri import SensorURI, register_scheme
+from optrack.sim.board import BOARD_PARAMS
 from optrack.sim.scenario import Scenario
 from optrack.sim.world import Simulation, WorldState
 from optrack.types import RGBDFrame
@@ -43,8 +49,6 @@ def _operator_params(hold_seconds: float | None) -> dict | None:
     place (sim_board.hold_seconds); None keeps the default."""
     if hold_seconds is None:
         return None
-    from optrack.sim.board import BOARD_PARAMS
-
     return {"sim_board": BOARD_PARAMS.create({"hold_seconds": hold_seconds})}
 
 
@@ -234,3 +238,10 @@ class SimulatedSensor(Sensor):
 
     def __repr__(self) -> str:
         return f"SimulatedSensor({self.uri!r})"
+
+
+def _open(uri: SensorURI, config: Mapping[str, Params]) -> SimulatedSensor:
+    return SimulatedSensor.from_uri(uri.text)
+
+
+register_scheme("sim", "sim://SCENARIO/N", _open)
