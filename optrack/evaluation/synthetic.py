@@ -149,6 +149,100 @@ def _ray_blocked(
     return radius - math.hypot(cx - qx, cy - qy)
 
 
+def _blocker(
+    scene: Scene,
+    sensor: SyntheticSensor,
+    person: Person,
+    xy: tuple[float, float],
+    present: list[tuple[Person, tuple[float, float]]],
+) -> tuple[float, tuple[float, ...]]:
+    """How far the line of sight from ``sensor`` to ``person`` (at ``xy``) is blocked
+    (the deepest overlap of a body or pillar, m; negative: clear) and the colours of the
+    person blocking most (empty for a pillar)."""
+    px, py = xy
+    blocked = -1.0
+    blocker_hist: tuple[float, ...] = ()
+    for q, (qx, qy) in present:
+        if q is person:
+            continue
+        b = _ray_blocked(sensor.x, sensor.y, px, py, qx, qy, 2 * scene.body_radius)
+        if b > blocked:
+            blocked, blocker_hist = b, q.histogram
+    for cx, cy, r in scene.pillars:
+        b = _ray_blocked(sensor.x, sensor.y, px, py, cx, cy, r + scene.body_radius)
+        if b > blocked:
+            blocked, blocker_hist = b, ()
+    return blocked, blocker_hist
+
+
+def _detection(
+    scene: Scene,
+    sensor: SyntheticSensor,
+    person: Person,
+    xy: tuple[float, float],
+    present: list[tuple[Person, tuple[float, float]]],
+    rng: np.random.Generator,
+) -> Detection | None:
+    """The sensor's detection of one person, or None (out of range or view, hidden
+    behind someone or a pillar, or missed)."""
+    px, py = xy
+    dx, dy = px - sensor.x, py - sensor.y
+    d = math.hypot(dx, dy)
+    if not sensor.min_range <= d <= sensor.max_range:
+        return None
+    cos_half = math.cos(math.radians(sensor.fov_deg) / 2)
+    if (dx * math.cos(sensor.yaw) + dy * math.sin(sensor.yaw)) / d < cos_half:
+        return None
+    blocked, blocker_hist = _blocker(scene, sensor, person, xy, present)
+    partly = blocked > 0.0
+    if blocked > scene.body_radius:  # fully hidden
+        return None
+    miss = scene.occluded_miss_probability if partly else scene.miss_probability
+    if rng.random() < miss:
+        return None
+    along = rng.normal(0.0, scene.depth_error * d * d)
+    ex, ey = rng.normal(0.0, scene.noise_std, size=2)
+    hist = np.asarray(person.histogram, dtype=np.float64)
+    if hist.size:
+        hist = hist * rng.lognormal(0.0, scene.histogram_noise, size=hist.size)
+        if partly and blocker_hist:  # the occluder's colours leak in
+            share = scene.occluder_colour_share
+            hist = (1 - share) * hist / hist.sum() + share * np.asarray(blocker_hist)
+        hist = hist / hist.sum()
+    return Detection(
+        x=px + ex + along * dx / d + sensor.offset[0],
+        y=py + ey + along * dy / d + sensor.offset[1],
+        z=person.height / 2,
+        height=person.height + float(rng.normal(0.0, 0.03)),
+        confidence=float(rng.normal(scene.confidence_mean, scene.confidence_std)),
+        camera_xyz=(0.0, 0.0, d),
+        occluded=partly,
+        histogram=[float(v) for v in hist],
+    )
+
+
+def _false_alarms(
+    scene: Scene, sensor: SyntheticSensor, rng: np.random.Generator
+) -> list[Detection]:
+    """Detections of nobody, anywhere in the sensor's view."""
+    alarms = []
+    for _ in range(rng.poisson(scene.false_alarms_per_frame)):
+        d = rng.uniform(sensor.min_range, sensor.max_range)
+        a = sensor.yaw + rng.uniform(-1, 1) * math.radians(sensor.fov_deg) / 2
+        alarms.append(
+            Detection(
+                x=sensor.x + d * math.cos(a),
+                y=sensor.y + d * math.sin(a),
+                z=0.8,
+                height=float(rng.uniform(1.3, 2.0)),
+                confidence=float(rng.normal(scene.false_alarm_confidence_mean, 0.5)),
+                camera_xyz=(0.0, 0.0, d),
+                histogram=list(_random_histogram(rng)),
+            )
+        )
+    return alarms
+
+
 def render(
     scene: Scene, seed: int = 0, arrival_jitter: float = 0.0
 ) -> tuple[list[DetectionBatch], SceneTruth]:
@@ -164,76 +258,16 @@ def render(
     for sensor in scene.sensors:
         period = 1.0 / sensor.rate
         n_frames = int(math.floor((scene.seconds - sensor.phase) / period)) + 1
-        cos_half = math.cos(math.radians(sensor.fov_deg) / 2)
-        look = (math.cos(sensor.yaw), math.sin(sensor.yaw))
         for k in range(n_frames):
             t = sensor.phase + k * period
             present = [(p, p.path.at(t)) for p in people]
             present = [(p, xy) for p, xy in present if xy is not None]
-            detections: list[Detection] = []
-            for p, (px, py) in present:
-                dx, dy = px - sensor.x, py - sensor.y
-                d = math.hypot(dx, dy)
-                if not sensor.min_range <= d <= sensor.max_range:
-                    continue
-                if (dx * look[0] + dy * look[1]) / d < cos_half:
-                    continue
-                blocked = -1.0
-                blocker_hist: tuple[float, ...] = ()
-                for q, (qx, qy) in present:
-                    if q is p:
-                        continue
-                    b = _ray_blocked(sensor.x, sensor.y, px, py, qx, qy, 2 * scene.body_radius)
-                    if b > blocked:
-                        blocked, blocker_hist = b, q.histogram
-                for cx, cy, r in scene.pillars:
-                    b = _ray_blocked(sensor.x, sensor.y, px, py, cx, cy, r + scene.body_radius)
-                    if b > blocked:
-                        blocked, blocker_hist = b, ()
-                fully = blocked > scene.body_radius
-                partly = blocked > 0.0
-                if fully:
-                    continue
-                miss = scene.occluded_miss_probability if partly else scene.miss_probability
-                if rng.random() < miss:
-                    continue
-                along = rng.normal(0.0, scene.depth_error * d * d)
-                ex, ey = rng.normal(0.0, scene.noise_std, size=2)
-                mx = px + ex + along * dx / d + sensor.offset[0]
-                my = py + ey + along * dy / d + sensor.offset[1]
-                hist = np.asarray(p.histogram, dtype=np.float64)
-                if hist.size:
-                    hist = hist * rng.lognormal(0.0, scene.histogram_noise, size=hist.size)
-                    if partly and blocker_hist:  # the occluder's colours leak in
-                        share = scene.occluder_colour_share
-                        hist = (1 - share) * hist / hist.sum() + share * np.asarray(blocker_hist)
-                    hist = hist / hist.sum()
-                detections.append(
-                    Detection(
-                        x=mx,
-                        y=my,
-                        z=p.height / 2,
-                        height=p.height + float(rng.normal(0.0, 0.03)),
-                        confidence=float(rng.normal(scene.confidence_mean, scene.confidence_std)),
-                        camera_xyz=(0.0, 0.0, d),
-                        occluded=partly,
-                        histogram=[float(v) for v in hist],
-                    )
-                )
-            for _ in range(rng.poisson(scene.false_alarms_per_frame)):
-                d = rng.uniform(sensor.min_range, sensor.max_range)
-                a = sensor.yaw + rng.uniform(-1, 1) * math.radians(sensor.fov_deg) / 2
-                detections.append(
-                    Detection(
-                        x=sensor.x + d * math.cos(a),
-                        y=sensor.y + d * math.sin(a),
-                        z=0.8,
-                        height=float(rng.uniform(1.3, 2.0)),
-                        confidence=float(rng.normal(scene.false_alarm_confidence_mean, 0.5)),
-                        camera_xyz=(0.0, 0.0, d),
-                        histogram=list(_random_histogram(rng)),
-                    )
-                )
+            detections = [
+                found
+                for p, xy in present
+                if (found := _detection(scene, sensor, p, xy, present, rng)) is not None
+            ]
+            detections += _false_alarms(scene, sensor, rng)
             arrival = t + (rng.uniform(0.0, arrival_jitter) if arrival_jitter > 0 else 0.0)
             batches.append(
                 (
