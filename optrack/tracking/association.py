@@ -19,31 +19,50 @@ the tracker loop reads top to bottom and each piece is tested on its own.
   is the Gaussian negative log-likelihood ``d2 + ln|S|`` rather than ``d2``
   alone, so that a long-lost track, whose wide ``S`` makes every ``d2`` small,
   cannot take a detection from a track that predicts it sharply.
-* :func:`weak_revival` says which weak detections may still take a track that
-  went missing moments ago: those the detector flags partly hidden, where the
-  track predicts the person.
 * :func:`assign` solves the assignment with scipy's ``linear_sum_assignment``.
+
+The tracker's cost and gate are swappable, as norfair's distance function and
+threshold: a :data:`Cost` maps the batch's :class:`Candidates` (every
+(track, detection) pair with what the motion model says of it) to an (N, M)
+cost, a :data:`Gate` to the (N, M) pairs allowed; :func:`associate` returns
+the pairs of least total cost. The defaults, :func:`likelihood_cost` and
+:func:`chi_square_gate`, are the ones above. The life-cycle then forbids what
+its rules forbid (:meth:`~optrack.tracking.lifecycle.LifecyclePolicy.revival_barred`),
+whichever the gate.
 """
 
 from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
 from optrack.tracking.motion import DIM_Z
+from optrack.types import Detection
+
+if TYPE_CHECKING:
+    from optrack.tracking.lifecycle import TrackState
 
 __all__ = [
     "UNMEASURED_VARIANCE",
+    "Candidates",
+    "Cost",
+    "Gate",
     "assign",
+    "associate",
     "association_cost",
+    "chi_square_gate",
     "extrapolate_late",
     "gate_value",
     "mahalanobis",
     "measurement_noise",
     "measurements",
+    "likelihood_cost",
     "reach",
-    "weak_revival",
     "within_reach",
 ]
 
@@ -173,24 +192,60 @@ def within_reach(
     return distance <= reach(unseen, max_speed, min_reach)[:, None]
 
 
-def weak_revival(
-    positions: np.ndarray,
-    hidden: np.ndarray,
-    predicted: np.ndarray,
-    unseen: np.ndarray,
-    window: float,
-    radius: float,
-) -> np.ndarray:
-    """(N, M) pairs where a detection too weak to start a track may still take a missing one.
+@dataclasses.dataclass(frozen=True)
+class Candidates:
+    """Every (track, detection) pair of one batch, as the cost and the gate see it.
 
-    Someone who steps out from behind another person or piece of furniture is
-    detected weakly at first, and the detector says why (``hidden`` (M,): flagged
-    occluded or partly outside the image). Such a detection may take a track lost
-    for at most ``window`` seconds (``unseen`` (N,)) that predicts the person
-    within ``radius`` of it (``predicted`` (N, 2)). Anything else weak still cannot
-    revive a lost track: furniture's weak false alarms would keep it alive.
+    N tracks, M detections; arrays are indexed [track, detection].
     """
-    if window <= 0:
-        return np.zeros((len(predicted), len(positions)), dtype=bool)
-    distance = np.linalg.norm(positions[None, :, :] - predicted[:, None, :], axis=2)
-    return (unseen <= window)[:, None] & hidden[None, :] & (distance <= radius)
+
+    t: float  # the batch's stamp
+    tracks: Sequence[TrackState]  # (N,) read only
+    detections: Sequence[Detection]  # (M,)
+    positions: np.ndarray  # (M, 2) the detections on the ground
+    confidence: np.ndarray  # (M,) the detector's confidence
+    predicted: np.ndarray  # (N, 4) each track's state [x, y, vx, vy] predicted to t
+    d2: np.ndarray  # (N, M) squared Mahalanobis distance of z = [x, y, vx, vy]
+    logdet: np.ndarray  # (N, M) ln|S|
+    last_seen: np.ndarray  # (N, 2) where each track was detected closest before t
+    unseen: np.ndarray  # (N,) and how long before t
+    chi_square: float  # the d2 quantile of gate_probability (the default gate's bound)
+    settings: Any  # the tracking parameters (attribute access)
+
+    def distance(self) -> np.ndarray:
+        """(N, M) ground distance from each track's predicted position to each detection."""
+        return np.linalg.norm(self.positions[None, :, :] - self.predicted[:, None, 0:2], axis=2)
+
+
+#: an association cost: (N, M) floats from the candidates; lower is a better pair
+Cost = Callable[[Candidates], np.ndarray]
+#: an association gate: (N, M) booleans from the candidates; only True pairs may be made
+Gate = Callable[[Candidates], np.ndarray]
+
+
+def likelihood_cost(candidates: Candidates) -> np.ndarray:
+    """The default cost: :func:`association_cost` with ``motion_weight`` and ``detector_weight``."""
+    s = candidates.settings
+    return association_cost(
+        candidates.d2, candidates.logdet, candidates.confidence, s.motion_weight, s.detector_weight
+    )
+
+
+def chi_square_gate(candidates: Candidates) -> np.ndarray:
+    """The default gate: ``d2`` within the chi-square quantile of ``gate_probability``, and
+    the detection within the track's reach (:func:`within_reach`)."""
+    c, s = candidates, candidates.settings
+    return (c.d2 <= c.chi_square) & within_reach(
+        c.positions, c.last_seen, c.unseen, s.max_speed, s.min_reach
+    )
+
+
+def associate(candidates: Candidates, cost: Cost, allowed: np.ndarray) -> list[tuple[int, int]]:
+    """Pairs (track, detection) of least total ``cost`` among the ``allowed`` ones."""
+    matrix = np.asarray(cost(candidates), dtype=np.float64)
+    if matrix.shape != allowed.shape:
+        raise ValueError(
+            f"the association cost gave an array of shape {matrix.shape} for "
+            f"{allowed.shape[0]} tracks and {allowed.shape[1]} detections"
+        )
+    return assign(matrix, allowed)

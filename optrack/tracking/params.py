@@ -8,6 +8,7 @@ the others are named after what they do and documented in docs/tracking.md.
 from __future__ import annotations
 
 from optrack.params import Param, Schema, register
+from optrack.tracking.lifecycle import EXPLAINED_WEAK_DETECTIONS
 
 __all__ = ["APPEARANCE_PARAMS", "SMOOTHING_PARAMS", "TRACKING_PARAMS"]
 
@@ -186,7 +187,7 @@ TRACKING_PARAMS = register(
             Param(
                 "explained_weak_detections",
                 "out_of_view",
-                choices=("out_of_view", "out_of_view_or_occluded", "none"),
+                choices=tuple(EXPLAINED_WEAK_DETECTIONS),
                 help="Weak detections whose low HOG margin the detector's flags explain (part of "
                 "the person outside the image; or also behind something nearer) weigh as "
                 "confident ones in a run of detections in a row. 'occluded' is off by default: "

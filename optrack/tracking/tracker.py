@@ -5,14 +5,17 @@ Each :meth:`Tracker.update` takes one :class:`~optrack.types.DetectionBatch`
 OpenPTrack's ``Tracker::updateTracks``:
 
 1. predicts every track to the batch's stamp (UKF, :mod:`.motion`);
-2. builds ``z = [x, y, vx, vy]`` and ``R`` for every (track, detection) pair,
-   the Mahalanobis ``d2`` and the gate (:mod:`.association`);
+2. builds ``z = [x, y, vx, vy]`` and ``R`` for every (track, detection) pair and
+   the Mahalanobis ``d2``; the gate says which pairs may be made, the cost what
+   each costs (both swappable: ``Tracker(cost=..., gate=...)``; defaults in
+   :mod:`.association`), and the life-cycle policy forbids what its rules forbid
+   (:mod:`.lifecycle`);
 3. assigns detections to tracks (``linear_sum_assignment``), then, with
    appearance on, gives detections the gate left over to lost tracks whose
-   colour classifier recognises them (:mod:`.appearance`);
-4. updates the assigned tracks, starts tracks from confident detections left
-   over, gives a recently lost identity back to a new track its classifier
-   recognises, and runs the life-cycle (:mod:`.lifecycle`).
+   colour classifier recognises them (:mod:`.recovery`);
+4. updates the assigned tracks, starts tracks from detections left over that the
+   policy lets start one, gives a recently lost identity back to a new track its
+   classifier recognises, and runs the life-cycle.
 
 A batch up to ``max_detection_delay`` behind the newest one is used: its
 detections are carried forward to each track's own time along the track's
@@ -25,38 +28,39 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import functools
 import math
 import types
 
 import numpy as np
 
 from optrack.errors import UserError
-from optrack.params import Params
-from optrack.tracking.appearance import AppearanceModel
+from optrack.params import Params, Value
 from optrack.tracking.association import (
-    assign,
-    association_cost,
+    Candidates,
+    Cost,
+    Gate,
+    associate,
+    chi_square_gate,
     extrapolate_late,
     gate_value,
+    likelihood_cost,
     mahalanobis,
     measurement_noise,
     measurements,
     reach,
-    weak_revival,
-    within_reach,
 )
 from optrack.tracking.lifecycle import (
     Fate,
+    LifecyclePolicy,
     TrackState,
-    advance,
-    on_detected,
-    on_missed,
     record_position,
     reference_position,
     seen_near,
 )
 from optrack.tracking.motion import ConstantVelocityUKF, position_variance
 from optrack.tracking.params import APPEARANCE_PARAMS, TRACKING_PARAMS
+from optrack.tracking.recovery import IdentityRecovery
 from optrack.types import Detection, DetectionBatch, Track, TrackBatch
 
 __all__ = ["Tracker", "TrackerStatus", "TrackingError"]
@@ -84,20 +88,60 @@ class TrackerStatus:
     warnings: list[str]
 
 
+@dataclasses.dataclass
+class _Batch:
+    """The detections of one batch the tracker uses, with what it derives from them."""
+
+    sensor: str
+    t: float
+    detections: list[Detection]
+    positions: np.ndarray  # (M, 2)
+    confidence: np.ndarray  # (M,)
+    position_var: np.ndarray  # (M,)
+    features: np.ndarray | None  # (M, K) colour features, appearance on
+
+
+@dataclasses.dataclass
+class _Motion:
+    """The UKF's prior and innovation for every (track, detection) pair of a batch."""
+
+    x_prior: np.ndarray  # (N, 4)
+    P_prior: np.ndarray  # (N, 4, 4)
+    zp: np.ndarray  # (N, 4)
+    Pxz: np.ndarray  # (N, 4, 4)
+    z: np.ndarray  # (N, M, 4)
+    S: np.ndarray  # (N, M, 4, 4)
+    d2: np.ndarray  # (N, M)
+    logdet: np.ndarray  # (N, M)
+
+
 class Tracker:
-    """Multi-sensor people tracker on the ground plane (OpenPTrack section 6, Munaro 2012)."""
+    """Multi-sensor people tracker on the ground plane (OpenPTrack section 6, Munaro 2012).
+
+    ``cost`` and ``gate`` replace the association's cost and gate (see
+    :class:`~optrack.tracking.association.Candidates`); by default
+    :func:`~optrack.tracking.association.likelihood_cost` and
+    :func:`~optrack.tracking.association.chi_square_gate`. ``gate`` is kept as
+    :attr:`gate_rule`; :attr:`gate` is the chi-square bound on ``d2`` of the
+    ``gate_probability`` parameter.
+    """
 
     def __init__(
         self,
         params: Params | None = None,
         appearance_params: Params | None = None,
         sensors: int | None = None,
+        *,
+        cost: Cost = likelihood_cost,
+        gate: Gate = chi_square_gate,
     ) -> None:
         """``sensors``: how many sensors feed the tracker, when known (appearance 'auto')."""
         self.params = params if params is not None else TRACKING_PARAMS.create()
         self.appearance_params = (
             appearance_params if appearance_params is not None else APPEARANCE_PARAMS.create()
         )
+        self.cost = cost
+        self.gate_rule = gate
         self.sensor_count = sensors
         self.tracks: list[TrackState] = []
         self.next_id = 1
@@ -107,18 +151,23 @@ class Tracker:
         self.dropped = 0
         self.dropped_by_sensor: collections.Counter[str] = collections.Counter()
         self.sensor_last: dict[str, float] = {}
-        self.recovered = 0
-        self.appearance_matches = 0
-        self.appearance = AppearanceModel(self.appearance_params)
+        self.recovery = IdentityRecovery(self.appearance_params)
+        self._settings: dict[str, Value] = {}
         self._derived_key: tuple[object, ...] = ()
         self._refresh()
 
     # ---------------------------------------------------------------- settings
     def _refresh(self) -> None:
-        """Recompute what derives from parameters (they can change live); ``self.p`` is a
-        plain snapshot of them for the hot loops."""
-        self.p = types.SimpleNamespace(**self.params.as_dict())
-        p = self.p
+        """Recompute what derives from parameters (they can change live): ``self.p``, a
+        plain snapshot of them for the hot loops, the life-cycle ``policy``, the UKF and
+        the gate."""
+        settings = self.params.as_dict()
+        if settings == self._settings:
+            return
+        self._settings = settings
+        self.p = p = types.SimpleNamespace(**settings)
+        self.policy = LifecyclePolicy.from_params(p)
+        self.reach = functools.partial(reach, max_speed=p.max_speed, min_reach=p.min_reach)
         key = (
             p.gate_probability,
             p.acceleration_variance,
@@ -153,20 +202,10 @@ class Tracker:
         newest stamp seen, which makes replays deterministic).
         """
         self._refresh()
-        p = self.p
         t = float(batch.stamp)
-        if not math.isfinite(t):
-            raise TrackingError(
-                f"a detection batch of sensor '{batch.sensor_id}' has stamp {batch.stamp}; "
-                "stamps must be finite seconds."
-            )
-        if batch.frame_id != "world":
-            raise TrackingError(
-                f"detections of sensor '{batch.sensor_id}' are in frame '{batch.frame_id}'; the "
-                "tracker needs world-frame detections, so give the detector the calibration."
-            )
+        _check(batch, t)
         reference = max(self.clock, t) if now is None else now
-        if reference - t > p.max_detection_delay:
+        if reference - t > self.p.max_detection_delay:
             self.dropped += 1
             self.dropped_by_sensor[batch.sensor_id] += 1
             return None
@@ -174,6 +213,25 @@ class Tracker:
         self.clock = max(self.clock, t)
         self.sensor_last[batch.sensor_id] = max(self.sensor_last.get(batch.sensor_id, t), t)
 
+        obs = self._usable(batch, t)
+        m = len(obs.detections)
+        self._advance(self.clock)  # statuses at this time; tracks whose time is up go
+        taken = np.zeros(m, dtype=bool)
+        explained = np.zeros(m, dtype=bool)
+        if self.tracks and m:
+            taken, explained = self._associate(obs)
+        self._start_tracks(obs, taken, explained)
+        on_missed = self.policy.on_missed
+        for track in self.tracks:
+            on_missed(track, obs.sensor, t)
+        if obs.features is not None:
+            self.recovery.recover_identities(self.tracks, t, self.reach)
+        return self.output(self.clock)
+
+    def _usable(self, batch: DetectionBatch, t: float) -> _Batch:
+        """The batch's detections confident enough and on the ground, and their features
+        when appearance is on."""
+        p = self.p
         detections = [
             d
             for d in batch.detections
@@ -182,49 +240,23 @@ class Tracker:
             and math.isfinite(d.y)
         ]
         m = len(detections)
-        positions = np.array([(d.x, d.y) for d in detections], dtype=np.float64).reshape(m, 2)
-        confidence = np.array([d.confidence for d in detections], dtype=np.float64)
-        position_var = position_variance(_sensor_distances(detections), p)
-        appearance = self.appearance_enabled
-        # an occluded detection's colours are partly someone else's or something else's:
-        # no appearance for it
-        features = (
-            self.appearance.features([[] if d.occluded else d.histogram for d in detections])
-            if appearance and m
-            else None
+        return _Batch(
+            sensor=batch.sensor_id,
+            t=t,
+            detections=detections,
+            positions=np.array([(d.x, d.y) for d in detections], dtype=np.float64).reshape(m, 2),
+            confidence=np.array([d.confidence for d in detections], dtype=np.float64),
+            position_var=position_variance(_sensor_distances(detections), p),
+            features=(
+                self.recovery.features(detections) if self.appearance_enabled and m else None
+            ),
         )
 
-        self._advance(self.clock)  # statuses at this time; tracks whose time is up go
-        taken = np.zeros(m, dtype=bool)
-        explained = np.zeros(m, dtype=bool)
-        if self.tracks and m:
-            taken, explained = self._associate(
-                t, batch.sensor_id, detections, positions, confidence, position_var, features
-            )
-        self._start_tracks(
-            t, batch.sensor_id, detections, positions, position_var, features, taken, explained
-        )
-        for track in self.tracks:
-            on_missed(track, batch.sensor_id, t)
-        if appearance and features is not None:
-            self._recover_identities(t)
-        return self.output(self.clock)
-
-    def _associate(
-        self,
-        t: float,
-        sensor: str,
-        detections: list[Detection],
-        positions: np.ndarray,
-        confidence: np.ndarray,
-        position_var: np.ndarray,
-        features: np.ndarray | None,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Steps 1-3 and the updates; returns which detections were taken, and which lie
-        in some track's gates (a person already tracked could explain them)."""
-        p = self.p
-        tracks = self.tracks
-        n, m = len(tracks), len(detections)
+    # ------------------------------------------------------------- association
+    def _predict(self, obs: _Batch) -> _Motion:
+        """Step 1 and the measurements of step 2 for every pair."""
+        p, t, tracks = self.p, obs.t, self.tracks
+        n = len(tracks)
         X = np.array([tr.x for tr in tracks])
         P = np.array([tr.P for tr in tracks])
         dt = np.array([t - tr.t for tr in tracks])
@@ -235,70 +267,84 @@ class Tracker:
         refs = [reference_position(tr, t, p.velocity_baseline) for tr in tracks]
         reference = np.array([(r[0], r[1]) for r in refs]).reshape(n, 2)
         baseline = np.array([r[2] for r in refs])
-        z = measurements(positions, reference, baseline, zp)
-        R = measurement_noise(position_var, baseline, self.ukf.spectral_density)
+        z = measurements(obs.positions, reference, baseline, zp)
+        R = measurement_noise(obs.position_var, baseline, self.ukf.spectral_density)
         if lag.any():
             extrapolate_late(z, R, lag, x_prior, P_prior, self.ukf.spectral_density)
         S = S0[:, None] + R
-        z_tilde = z - zp[:, None, :]
-        d2, logdet = mahalanobis(z_tilde, S)
+        d2, logdet = mahalanobis(z - zp[:, None, :], S)
+        return _Motion(x_prior, P_prior, zp, Pxz, z, S, d2, logdet)
+
+    def _associate(self, obs: _Batch) -> tuple[np.ndarray, np.ndarray]:
+        """Steps 1-3 and the updates; returns which detections were taken, and which lie
+        in some track's gates (a person already tracked could explain them)."""
+        tracks, t = self.tracks, obs.t
+        motion = self._predict(obs)
         seen = [seen_near(tr, t) for tr in tracks]
-        last_seen = np.array([(s[0], s[1]) for s in seen]).reshape(n, 2)
-        unseen = np.array([s[2] for s in seen])
-        allowed = (d2 <= self.gate) & within_reach(
-            positions, last_seen, unseen, p.max_speed, p.min_reach
+        candidates = Candidates(
+            t=t,
+            tracks=tracks,
+            detections=obs.detections,
+            positions=obs.positions,
+            confidence=obs.confidence,
+            predicted=motion.x_prior,
+            d2=motion.d2,
+            logdet=motion.logdet,
+            last_seen=np.array([(s[0], s[1]) for s in seen]).reshape(len(tracks), 2),
+            unseen=np.array([s[2] for s in seen]),
+            chi_square=self.gate,
+            settings=self.p,
         )
+        allowed = np.array(self.gate_rule(candidates), dtype=bool)
         # a weak detection some track (even a lost one) could take is no new person
         explained = allowed.any(axis=0)
-        # a detection too weak to start a confident track cannot revive a missing one, unless
-        # the detector explains its weakness and the track, lost moments ago, predicts the
-        # person right there (someone stepping out from behind someone else)
-        missing = np.array([t - tr.confirmed for tr in tracks]) >= p.sec_before_missing
-        weak = confidence < p.min_confidence_initialization
-        barred = missing[:, None] & weak[None, :]
-        if barred.any():
-            hidden = np.array([_hidden(d, "out_of_view_or_occluded") for d in detections])
-            barred &= ~weak_revival(
-                positions, hidden, x_prior[:, 0:2], unseen, p.sec_weak_revival, p.min_reach
-            )
-            allowed &= ~barred
-        if features is not None:
+        allowed &= ~self.policy.revival_barred(candidates)
+        if obs.features is not None:
             # a person lost for long is not given someone their classifier clearly rejects
-            lost = self._missing_candidates(t, set())
-            if lost:
-                looks = np.array([self.appearance.confidence(tracks[i].id, features) for i in lost])
-                allowed[lost] &= looks >= -self.appearance_params.min_confidence
-        cost = association_cost(d2, logdet, confidence, p.motion_weight, p.detector_weight)
-        pairs = assign(cost, allowed)
-
-        taken = np.zeros(m, dtype=bool)
+            rejected = self.recovery.rejected(tracks, t, obs.features)
+            if rejected is not None:
+                allowed &= ~rejected
+        pairs = associate(candidates, self.cost, allowed)
+        matched = [(tracks[i], j) for i, j in pairs]
+        taken = np.zeros(len(obs.detections), dtype=bool)
         if pairs:
-            ti = np.array([i for i, _ in pairs])
-            dj = np.array([j for _, j in pairs])
-            x_post, P_post = self.ukf.update(
-                x_prior[ti], P_prior[ti], zp[ti], S[ti, dj], Pxz[ti], z[ti, dj]
-            )
-            for k, (i, j) in enumerate(pairs):
-                self._take(
-                    tracks[i], max(tracks[i].t, t), x_post[k], P_post[k], t, sensor, detections[j]
-                )
-                taken[j] = True
-
-        if features is not None:
-            recovered = self._appearance_step(
-                t,
-                sensor,
-                detections,
-                positions,
-                position_var,
-                features,
-                taken,
-                {i for i, _ in pairs},
-            )
-            for j in recovered:
-                taken[j] = True
-            self._learn(t, pairs, detections, features)
+            self._update_pairs(obs, motion, pairs)
+            taken[[j for _, j in pairs]] = True
+        if obs.features is not None:
+            self._appearance_step(obs, taken, {i for i, _ in pairs})
+            self.recovery.learn(t, matched, obs.features)
         return taken, explained
+
+    def _update_pairs(self, obs: _Batch, motion: _Motion, pairs: list[tuple[int, int]]) -> None:
+        """The UKF update of every associated track with its detection."""
+        ti = np.array([i for i, _ in pairs])
+        dj = np.array([j for _, j in pairs])
+        m = motion
+        x_post, P_post = self.ukf.update(
+            m.x_prior[ti], m.P_prior[ti], m.zp[ti], m.S[ti, dj], m.Pxz[ti], m.z[ti, dj]
+        )
+        for k, (i, j) in enumerate(pairs):
+            track = self.tracks[i]
+            self._take(track, max(track.t, obs.t), x_post[k], P_post[k], obs, j)
+
+    def _appearance_step(self, obs: _Batch, taken: np.ndarray, associated: set[int]) -> None:
+        """Second association: detections the gate left over (and the policy lets a lost
+        track take) against lost tracks' classifiers; each taken one restarts its track's
+        state there, and merges a track started on that person while they were lost."""
+        assert obs.features is not None
+        usable = np.array([self.policy.may_be_recognised(d) for d in obs.detections], dtype=bool)
+        free = np.flatnonzero(~taken & usable)
+        matches = self.recovery.match_lost(
+            self.tracks, obs.t, obs.positions, obs.features, free, associated, self.reach
+        )
+        for track, j in matches:
+            lost_since = track.confirmed
+            x, P = self._initial_state(obs.positions[j], obs.position_var[j])
+            self._take(track, max(track.t, obs.t), x, P, obs, j)
+            self.recovery.absorb_young(
+                self.tracks, track, obs.positions[j], lost_since, self.p.min_reach
+            )
+            taken[j] = True
 
     def _take(
         self,
@@ -306,185 +352,17 @@ class Tracker:
         state_time: float,
         x: np.ndarray,
         P: np.ndarray,
-        t: float,
-        sensor: str,
-        detection: Detection,
+        obs: _Batch,
+        j: int,
     ) -> None:
+        """The track's new state, after detection j of the batch."""
         track.x, track.P, track.t = x, P, state_time
-        record_position(track, t, self.p.max_detection_delay + 2 * self.p.velocity_baseline)
-        on_detected(
-            track,
-            t,
-            detection.confidence,
-            detection.height,
-            sensor,
-            self.p,
-            _hidden(detection, self.p.explained_weak_detections),
-            detection.out_of_view,
-        )
+        self._record(track, obs, j)
 
-    # -------------------------------------------------------------- appearance
-    def _missing_candidates(self, t: float, skip: set[int]) -> list[int]:
-        """Indices of validated tracks lost long enough to give their identity away."""
-        wait = self.appearance_params.sec_missing_before_recovery
-        return [
-            i
-            for i, tr in enumerate(self.tracks)
-            if i not in skip
-            and tr.validated
-            and t - tr.confirmed >= wait
-            and (c := self.appearance.classifiers.get(tr.id)) is not None
-            and c.trained
-        ]
-
-    def _reach(self, lost_for: np.ndarray) -> np.ndarray:
-        return reach(lost_for, self.p.max_speed, self.p.min_reach)
-
-    def _appearance_step(
-        self,
-        t: float,
-        sensor: str,
-        detections: list[Detection],
-        positions: np.ndarray,
-        position_var: np.ndarray,
-        features: np.ndarray,
-        taken: np.ndarray,
-        associated: set[int],
-    ) -> list[int]:
-        """Second association: detections the gate left over against lost tracks' classifiers.
-        A detection too weak to start a track revives none here (the motion step's rule)
-        unless the detector's flags explain its weakness (``explained_weak_detections``; the
-        motion step has no such exception): the detector's weak false alarms (furniture)
-        would otherwise take the colours of someone lost."""
-        p = self.p
-        usable = np.array(
-            [
-                d.confidence >= p.min_confidence_initialization
-                or _hidden(d, p.explained_weak_detections)
-                for d in detections
-            ],
-            dtype=bool,
-        )
-        free = np.flatnonzero(~taken & usable)
-        candidates = self._missing_candidates(t, associated)
-        if not free.size or not candidates:
-            return []
-        conf = np.array(
-            [self.appearance.confidence(self.tracks[i].id, features[free]) for i in candidates]
-        )
-        last = np.array([_last_seen(self.tracks[i]) for i in candidates])
-        lost_for = np.array([t - self.tracks[i].confirmed for i in candidates])
-        distance = np.linalg.norm(positions[free][None, :, :] - last[:, None, :], axis=2)
-        allowed = (conf >= self.appearance_params.min_confidence) & (
-            distance <= self._reach(lost_for)[:, None]
-        )
-        out = []
-        for a, b in assign(-conf, allowed):
-            track, j = self.tracks[candidates[a]], int(free[b])
-            lost_since = track.confirmed
-            x, P = self._initial_state(positions[j], position_var[j])
-            self._take(track, max(track.t, t), x, P, t, sensor, detections[j])
-            self._absorb_young(track, positions[j], lost_since)
-            self.appearance_matches += 1
-            out.append(j)
-        return out
-
-    def _absorb_young(self, track: TrackState, position: np.ndarray, lost_since: float) -> None:
-        """A track started near a recovered person while they were lost is that person
-        (its first detections were too occluded to recognise): merge it into the identity."""
-        a = self.appearance_params
-        for other in list(self.tracks):
-            if other is track or other.born <= lost_since:
-                continue
-            ox, oy = _last_seen(other)
-            if math.hypot(ox - position[0], oy - position[1]) > self.p.min_reach:
-                continue
-            if other.features:
-                score = np.mean(self.appearance.confidence(track.id, np.array(other.features)))
-                if score < a.min_confidence:
-                    continue
-            self.tracks.remove(other)
-            self.appearance.drop(other.id)
-            track.detections += other.detections
-            track.confident_detections += other.confident_detections
-
-    def _learn(
-        self,
-        t: float,
-        pairs: list[tuple[int, int]],
-        detections: list[Detection],
-        features: np.ndarray,
-    ) -> None:
-        """Each associated, unoccluded detection teaches its track (and is kept for identity
-        recovery among its first ones); the batch's others are negatives."""
-        for i, j in pairs:
-            track = self.tracks[i]
-            if not np.all(np.isfinite(features[j])):
-                continue  # occluded, or no histogram
-            if len(track.features) < self.appearance_params.recovery_detections:
-                track.features.append(features[j])
-            self.appearance.learn(t, track.id, features[j], np.delete(features, j, axis=0))
-
-    def _recover_identities(self, t: float) -> None:
-        """Give a lost identity back to a new track its classifier recognises (Munaro 5.4),
-        once the new track is validated: a false alarm (furniture) that happens to wear a
-        lost person's colours must not become that person, shown at once. A track validated
-        within its first ``recovery_detections`` detections is tried at each of them, one
-        validated later (a weak run) once."""
-        a = self.appearance_params
-        for track in list(self.tracks):
-            if track.recovery_done or track not in self.tracks or not track.validated:
-                continue
-            if not track.features:
-                track.recovery_done = track.detections >= a.recovery_detections
-                continue
-            F = np.array(track.features)
-            best: tuple[float, int | None, int] = (a.min_confidence, None, 0)
-            here = np.array(track.history[0][1:] if track.history else track.x[:2])
-            for other in self.tracks:
-                if other is track or not other.validated or other.confirmed >= track.born:
-                    continue
-                if track.born - other.confirmed < a.sec_missing_before_recovery:
-                    continue
-                c = self.appearance.classifiers.get(other.id)
-                if c is None or not c.trained:
-                    continue
-                last = np.array(_last_seen(other))
-                reach = self._reach(np.array([track.born - other.confirmed]))[0]
-                if np.linalg.norm(here - last) > reach:
-                    continue
-                score = float(np.mean(self.appearance.confidence(other.id, F)))
-                if score >= best[0]:
-                    best = (score, other.id, 0)
-            for tid, lx, ly, last_detection in self.appearance.lost_candidates():
-                if last_detection >= track.born:
-                    continue
-                reach = self._reach(np.array([track.born - last_detection]))[0]
-                if np.hypot(here[0] - lx, here[1] - ly) > reach:
-                    continue
-                score = float(np.mean(self.appearance.lost_confidence(tid, F)))
-                if score >= best[0]:
-                    best = (score, tid, 1)
-            if best[1] is not None:
-                self._give_identity(track, best[1], from_deleted=bool(best[2]))
-                track.recovery_done = True
-            else:
-                track.recovery_done = track.detections >= a.recovery_detections
-
-    def _give_identity(self, track: TrackState, old_id: int, from_deleted: bool) -> None:
-        self.appearance.drop(track.id)
-        if from_deleted:
-            classifier = self.appearance.take_lost(old_id)
-        else:
-            old = next(tr for tr in self.tracks if tr.id == old_id)
-            self.tracks.remove(old)
-            classifier = self.appearance.classifiers.pop(old_id, None)
-            track.born = min(track.born, old.born)
-            track.detections += old.detections
-        track.id = old_id
-        if classifier is not None:
-            self.appearance.adopt(old_id, classifier)
-        self.recovered += 1
+    def _record(self, track: TrackState, obs: _Batch, j: int) -> None:
+        """Detection j of the batch is the track's: its history and its life-cycle."""
+        record_position(track, obs.t, self.p.max_detection_delay + 2 * self.p.velocity_baseline)
+        self.policy.on_detected(track, obs.detections[j], obs.t, obs.sensor)
 
     # ---------------------------------------------------------- birth, death
     def _initial_state(
@@ -494,66 +372,38 @@ class Tracker:
         v = self.p.initial_velocity_variance
         return x, np.diag([position_var, position_var, v, v])
 
-    def _start_tracks(
-        self,
-        t: float,
-        sensor: str,
-        detections: list[Detection],
-        positions: np.ndarray,
-        position_var: np.ndarray,
-        features: np.ndarray | None,
-        taken: np.ndarray,
-        explained: np.ndarray,
-    ) -> None:
-        p = self.p
-        # confident detections start tracks that detections_to_validate such detections
-        # validate; weaker ones, tracks that weak_detections_to_validate in a row validate,
-        # and only where no track could explain them (a weak second detection of someone
-        # tracked, from another sensor or a split silhouette, is not a new person)
-        floor = min(p.min_confidence_initialization, p.min_confidence_weak_initialization)
-        for j, d in enumerate(detections):
-            if taken[j] or d.confidence < floor:
+    def _start_tracks(self, obs: _Batch, taken: np.ndarray, explained: np.ndarray) -> None:
+        """A track from every detection left over that the policy lets start one."""
+        for j, d in enumerate(obs.detections):
+            if taken[j] or not self.policy.may_start(d, near_a_track=bool(explained[j])):
                 continue
-            if d.confidence < p.min_confidence_initialization and explained[j]:
-                continue
-            x, P = self._initial_state(positions[j], position_var[j])
+            x, P = self._initial_state(obs.positions[j], obs.position_var[j])
             track = TrackState(
                 id=self.next_id,
                 x=x,
                 P=P,
-                t=t,
-                born=t,
-                last_detection=t,
+                t=obs.t,
+                born=obs.t,
+                last_detection=obs.t,
                 height=d.height,
                 confidence=d.confidence,
             )
             self.next_id += 1
-            record_position(track, t, p.max_detection_delay + 2 * p.velocity_baseline)
-            on_detected(
-                track,
-                t,
-                d.confidence,
-                d.height,
-                sensor,
-                p,
-                _hidden(d, p.explained_weak_detections),
-                d.out_of_view,
-            )
-            if features is not None and np.all(np.isfinite(features[j])):
-                track.features.append(features[j])
+            self._record(track, obs, j)
+            if obs.features is not None:
+                self.recovery.note_birth(track, obs.features[j])
             self.tracks.append(track)
 
     def _advance(self, now: float) -> None:
         kept = []
         for track in self.tracks:
-            fate = advance(track, now, self.p)
+            fate = self.policy.advance(track, now)
             if fate is Fate.KEEP:
                 kept.append(track)
             elif fate is Fate.OLD:
-                x, y = _last_seen(track)
-                self.appearance.forget(track.id, x, y, track.confirmed, now)
+                self.recovery.forget(track, now)
             else:
-                self.appearance.drop(track.id)
+                self.recovery.drop(track)
         self.tracks = kept
 
     # ------------------------------------------------------------------ output
@@ -610,28 +460,24 @@ class Tracker:
             sensors=dict(self.sensor_last),
             silent_sensors=silent,
             appearance=self.appearance_enabled,
-            recovered_identities=self.recovered,
-            appearance_matches=self.appearance_matches,
+            recovered_identities=self.recovery.recovered,
+            appearance_matches=self.recovery.matches,
             warnings=warnings,
         )
 
 
-def _last_seen(track: TrackState) -> tuple[float, float]:
-    """Where the track was last detected (its newest filtered position)."""
-    if track.history:
-        return track.history[-1][1], track.history[-1][2]
-    return float(track.x[0]), float(track.x[1])
-
-
-def _hidden(detection: Detection, explained: str) -> bool:
-    """Whether the detector flagged the detection partly hidden in a way that explains a weak
-    HOG margin (``explained_weak_detections``): partly outside the image, or also behind
-    something nearer to the sensor."""
-    if explained == "none":
-        return False
-    if explained == "out_of_view_or_occluded" and detection.occluded:
-        return True
-    return detection.out_of_view
+def _check(batch: DetectionBatch, t: float) -> None:
+    """Refuse a batch the tracker cannot use, with a sentence."""
+    if not math.isfinite(t):
+        raise TrackingError(
+            f"a detection batch of sensor '{batch.sensor_id}' has stamp {batch.stamp}; "
+            "stamps must be finite seconds."
+        )
+    if batch.frame_id != "world":
+        raise TrackingError(
+            f"detections of sensor '{batch.sensor_id}' are in frame '{batch.frame_id}'; the "
+            "tracker needs world-frame detections, so give the detector the calibration."
+        )
 
 
 def _sensor_distances(detections: list[Detection]) -> np.ndarray:

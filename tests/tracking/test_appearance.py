@@ -205,3 +205,19 @@ def test_a_weak_detection_in_a_lost_persons_colours_does_not_revive_her() -> Non
             assert red.last_detection == last  # a weak false alarm: red stays lost
     # the same weak detection, flagged partly out of view, is explained: red takes it
     assert red.last_detection == 4.5 + 1 / 30
+
+
+def test_an_occluded_detections_colours_neither_teach_nor_judge() -> None:
+    """Its colours are partly someone else's: identity recovery gives it no features."""
+    from optrack.tracking.recovery import IdentityRecovery
+    from optrack.types import Detection
+
+    recovery = IdentityRecovery(APPEARANCE_PARAMS.create())
+    seen = Detection(x=0.0, y=0.0, z=0.9, height=1.7, confidence=1.0, histogram=list(RED))
+    hidden = Detection(
+        x=1.0, y=0.0, z=0.9, height=1.7, confidence=1.0, histogram=list(RED), occluded=True
+    )
+    features = recovery.features([seen, hidden])
+    assert np.isfinite(features[0]).all()
+    assert np.isnan(features[1]).all()
+    assert recovery.features([hidden]) is None

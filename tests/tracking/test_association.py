@@ -9,15 +9,19 @@ from scipy.stats import chi2
 from optrack.tracking import TRACKING_PARAMS, Tracker
 from optrack.tracking.association import (
     UNMEASURED_VARIANCE,
+    Candidates,
     assign,
+    associate,
     association_cost,
+    chi_square_gate,
     gate_value,
+    likelihood_cost,
     mahalanobis,
     measurement_noise,
     measurements,
-    weak_revival,
     within_reach,
 )
+from optrack.tracking.lifecycle import weak_revival
 from optrack.types import Detection, DetectionBatch
 
 
@@ -144,3 +148,88 @@ def test_weak_revival_needs_a_flag_a_recent_loss_and_the_predicted_place() -> No
         False,
         True,
     ]
+
+
+def _candidates(positions, predicted, confidence, d2, tracks=(), **settings) -> Candidates:
+    positions = np.asarray(positions, dtype=float)
+    predicted = np.asarray(predicted, dtype=float)
+    n, m = len(predicted), len(positions)
+    d2 = np.asarray(d2, dtype=float)
+    return Candidates(
+        t=1.0,
+        tracks=tracks,
+        detections=[_detection(x, y, c) for (x, y), c in zip(positions, confidence, strict=True)],
+        positions=positions,
+        confidence=np.asarray(confidence, dtype=float),
+        predicted=np.hstack([predicted, np.zeros((n, 2))]),
+        d2=d2,
+        logdet=np.zeros((n, m)),
+        last_seen=predicted,
+        unseen=np.zeros(n),
+        chi_square=gate_value(0.99),
+        settings=TRACKING_PARAMS.create(settings),
+    )
+
+
+def test_the_default_cost_and_gate_are_the_likelihood_and_the_chi_square_gate_with_reach() -> None:
+    c = _candidates(
+        [[0.0, 0.0], [0.6, 0.0], [3.0, 0.0]],
+        [[0.0, 0.0], [1.0, 0.0]],
+        [1.0, -1.0, 0.5],
+        [[0.5, 12.0, 20.0], [14.0, 3.0, 1.0]],
+    )
+    np.testing.assert_array_equal(
+        likelihood_cost(c), association_cost(c.d2, c.logdet, c.confidence, 0.25, -0.25)
+    )
+    # d2 within 13.28 and within min_reach (0.5 m) of where the track was last seen (just
+    # now): (0, 1) passes the d2 bound but not the reach, (1, 2) the other way round
+    assert chi_square_gate(c).tolist() == [[True, False, False], [False, True, False]]
+    tracker = Tracker()
+    assert (tracker.cost, tracker.gate_rule) == (likelihood_cost, chi_square_gate)
+
+
+def test_association_returns_the_pairs_of_least_custom_cost() -> None:
+    c = _candidates([[0.0, 0.0], [1.0, 0.0]], [[0.1, 0.0], [0.9, 0.0]], [1.0, 1.0], np.ones((2, 2)))
+    allowed = np.ones((2, 2), dtype=bool)
+    assert sorted(associate(c, lambda c: c.distance(), allowed)) == [(0, 0), (1, 1)]
+    assert sorted(associate(c, lambda c: -c.distance(), allowed)) == [(0, 1), (1, 0)]
+    with pytest.raises(ValueError, match="shape"):
+        associate(c, lambda c: np.zeros((2, 3)), allowed)
+
+
+def _still(tracker: Tracker, frames: int = 30) -> None:
+    for k in range(frames):
+        tracker.update(DetectionBatch("a", k / 30, detections=[_detection(0.0, 0.0)]))
+
+
+def test_a_custom_cost_changes_which_detection_a_track_takes() -> None:
+    """Someone stands still; two detections come, the nearer a little less confident. The
+    likelihood cost gives the track the nearer one (the other starts a track); a cost that
+    only asks for confidence, the other."""
+    batch = DetectionBatch(
+        "a", 1.0, detections=[_detection(0.0, 0.0, 1.0), _detection(0.1, 0.0, 1.2)]
+    )
+    started_at = {}
+    for name, cost in (
+        ("default", None),
+        ("most confident", lambda c: -np.broadcast_to(c.confidence, c.d2.shape)),
+    ):
+        tracker = Tracker() if cost is None else Tracker(cost=cost)
+        _still(tracker)
+        tracker.update(batch)
+        (_, new) = tracker.tracks
+        started_at[name] = float(new.x[0])
+    assert started_at == {"default": 0.1, "most confident": 0.0}
+
+
+def test_a_custom_gate_lets_a_track_take_a_detection_the_chi_square_gate_refuses() -> None:
+    """norfair's way: a Euclidean distance threshold instead of the Mahalanobis gate. A
+    person standing still shows up 0.45 m away in one frame: outside the chi-square gate of
+    a track that predicts them sharply (a second track starts), inside a 1 m threshold."""
+    jump = DetectionBatch("a", 1.0, detections=[_detection(0.45, 0.0)])
+    default, euclidean = Tracker(), Tracker(gate=lambda c: c.distance() <= 1.0)
+    for tracker in (default, euclidean):
+        _still(tracker)
+        tracker.update(jump)
+    assert default.next_id == 3 and default.tracks[0].last_detection < 1.0
+    assert euclidean.next_id == 2 and euclidean.tracks[0].last_detection == 1.0

@@ -2,9 +2,16 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from optrack.tracking import TRACKING_PARAMS, Tracker
+from optrack.tracking.lifecycle import (
+    EXPLAINED_WEAK_DETECTIONS,
+    REVIVAL_FLAGS,
+    Flag,
+    LifecyclePolicy,
+)
 from optrack.types import Detection, DetectionBatch, TrackStatus
 
 RATE = 30.0
@@ -339,3 +346,96 @@ def test_a_weak_partly_hidden_detection_away_from_the_prediction_revives_nothing
     _run(tracker, 1.3, 1.5, far, confidence=weak, occluded=True)
     assert tracker.tracks[0].last_detection < 1.0
     assert tracker.output().tracks[0].status == "missing"
+
+
+def _detection(confidence: float, **flags: bool) -> Detection:
+    return Detection(x=0.0, y=0.0, z=0.9, height=1.7, confidence=confidence, **flags)
+
+
+def test_the_policy_is_read_from_the_parameters_and_follows_a_live_change() -> None:
+    tracker = Tracker()
+    policy = tracker.policy
+    assert policy == LifecyclePolicy.from_params(TRACKING_PARAMS.create())
+    assert (policy.min_confidence, policy.weak_floor) == (-1.5, -3.5)
+    assert policy.explaining_flags == {Flag.OUT_OF_VIEW}
+    assert (policy.out_of_view_hold, policy.revival_radius) == (False, 0.5)
+    # a weak run: a confident or explained detection weighs 1/3, a weak one 1/10
+    assert (policy.strong_weight, policy.weak_weight, policy.run_to_validate) == (10, 3, 30)
+    tracker.params.update({"explained_weak_detections": "none", "out_of_view_hold": "on"})
+    tracker.update(_batch(0.0))
+    assert tracker.policy.explaining_flags == frozenset()
+    assert tracker.policy.out_of_view_hold
+
+
+def test_the_detectors_flags_are_named_and_each_setting_says_which_explain_weakness() -> None:
+    assert {flag.value for flag in Flag} <= set(Detection.__struct_fields__)
+    assert TRACKING_PARAMS["explained_weak_detections"].choices == tuple(EXPLAINED_WEAK_DETECTIONS)
+    assert REVIVAL_FLAGS == {Flag.OCCLUDED, Flag.OUT_OF_VIEW}
+    both = LifecyclePolicy.from_params(
+        TRACKING_PARAMS.create({"explained_weak_detections": "out_of_view_or_occluded"})
+    )
+    none = LifecyclePolicy.from_params(
+        TRACKING_PARAMS.create({"explained_weak_detections": "none"})
+    )
+    default = Tracker().policy
+    for flags, by_default, by_both in (
+        ({"out_of_view": True}, True, True),
+        ({"occluded": True}, False, True),
+        ({}, False, False),
+    ):
+        weak = _detection(-2.5, **flags)
+        assert default.explained(weak) is by_default
+        assert both.explained(weak) is by_both
+        assert not none.explained(weak)
+        # appearance gives a lost track a weak detection only when its flags explain it
+        assert default.may_be_recognised(weak) is by_default
+    assert default.may_be_recognised(_detection(0.0))
+
+
+@pytest.mark.parametrize(
+    ("confidence", "near_a_track", "starts"),
+    [
+        (0.0, False, True),  # confident
+        (0.0, True, True),  # confident, even beside a track (two people close together)
+        (-2.5, False, True),  # weak, nobody tracked there
+        (-2.5, True, False),  # weak, a track could take it: no new person
+        (-3.6, False, False),  # below min_confidence_weak_initialization
+    ],
+)
+def test_the_policy_says_which_detection_left_over_starts_a_track(
+    confidence: float, near_a_track: bool, starts: bool
+) -> None:
+    assert Tracker().policy.may_start(_detection(confidence), near_a_track) is starts
+
+
+def test_the_policy_bars_weak_detections_from_missing_tracks_but_for_a_weak_revival() -> None:
+    from optrack.tracking.association import Candidates
+
+    tracker = Tracker()
+    _run(tracker, 0.0, 1.0, 1.0, 3.0)  # two people; the one at 3 m is lost from 1.0 s
+    _run(tracker, 1.0, 1.3, 1.0)
+    near, lost = tracker.tracks
+    detections = [
+        _detection(0.0),  # confident: bars nothing
+        _detection(-2.5),  # weak, unflagged: cannot revive
+        _detection(-2.5, occluded=True),  # weak, flagged, where the lost track predicts
+    ]
+    positions = np.array([[3.0, 0.0], [3.0, 0.0], [3.1, 0.0]])
+    candidates = Candidates(
+        t=1.3,
+        tracks=tracker.tracks,
+        detections=detections,
+        positions=positions,
+        confidence=np.array([d.confidence for d in detections]),
+        predicted=np.array([near.x, lost.x]),
+        d2=np.zeros((2, 3)),
+        logdet=np.zeros((2, 3)),
+        last_seen=np.array([near.x[:2], lost.x[:2]]),
+        unseen=np.array([0.0, 0.3]),
+        chi_square=tracker.gate,
+        settings=tracker.p,
+    )
+    barred = tracker.policy.revival_barred(candidates)
+    assert barred.tolist() == [[False, False, False], [False, True, False]]
+    off = LifecyclePolicy.from_params(TRACKING_PARAMS.create({"sec_weak_revival": 0.0}))
+    assert off.revival_barred(candidates).tolist() == [[False, False, False], [False, True, True]]
