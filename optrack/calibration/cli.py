@@ -42,9 +42,6 @@ def _board(args: argparse.Namespace) -> Checkerboard:
     return Checkerboard.parse(args.board, args.square)
 
 
-# ------------------------------------------------------------------ intrinsics
-
-
 def cmd_calibrate_intrinsics(args: argparse.Namespace) -> int:
     """Intrinsics of one camera from chessboard images."""
     from optrack.calibration.intrinsics import calibrate_intrinsics, corners_from_images
@@ -64,52 +61,13 @@ def cmd_calibrate_intrinsics(args: argparse.Namespace) -> int:
     payload = result.as_dict(labels)
     payload["not_found"] = missing
     if args.out:
-        _write_intrinsics(args.out, result)
+        result.save(args.out)
         payload["out"] = args.out
     if args.json:
         emit_json(payload)
     else:
-        k = result.intrinsics
-        info(
-            f"fx={k.fx:.2f} fy={k.fy:.2f} cx={k.cx:.2f} cy={k.cy:.2f} dist={[round(float(v), 5) for v in k.dist]} "
-            f"RMS {result.rms:.3f} px over {len(result.used)} views"
-            + (
-                f"; rejected {', '.join(labels[i] for i in result.rejected)}"
-                if result.rejected
-                else ""
-            )
-            + f"; coverage {result.coverage.fraction:.0%} of the image"
-        )
+        info(result.describe(labels))
     return 0
-
-
-def _write_intrinsics(path: str, result: Any) -> None:
-    """The intrinsics (``--out``) as a small YAML file."""
-    import yaml
-
-    from optrack.io.files import atomic_write_text
-
-    k = result.intrinsics
-    atomic_write_text(
-        path,
-        yaml.safe_dump(
-            {
-                "fx": k.fx,
-                "fy": k.fy,
-                "cx": k.cx,
-                "cy": k.cy,
-                "width": k.width,
-                "height": k.height,
-                "dist": list(k.dist),
-                "rms_px": result.rms,
-                "views": len(result.used),
-            },
-            sort_keys=False,
-        ),
-    )
-
-
-# ---------------------------------------------------------------------- stereo
 
 
 def cmd_calibrate_stereo(args: argparse.Namespace) -> int:
@@ -141,16 +99,11 @@ def cmd_calibrate_stereo(args: argparse.Namespace) -> int:
     return 0
 
 
-# --------------------------------------------------------------------- network
-
-
 def _network_params(args: argparse.Namespace) -> Params:
     from optrack.calibration.network import NETWORK_PARAMS
 
-    overrides: dict[str, Any] = {}
-    if getattr(args, "board_thickness", None) is not None:
-        overrides["board_thickness"] = args.board_thickness
-    return NETWORK_PARAMS.create(overrides)
+    thickness = getattr(args, "board_thickness", None)
+    return NETWORK_PARAMS.create({} if thickness is None else {"board_thickness": thickness})
 
 
 def _recording_board(args: argparse.Namespace, recording: Any) -> Checkerboard:
@@ -171,9 +124,9 @@ def _recording_board(args: argparse.Namespace, recording: Any) -> Checkerboard:
 
 def cmd_calibrate_network(args: argparse.Namespace) -> int:
     """Calibrate every sensor of a recorded checkerboard session."""
-    from optrack.calibration.files import save_calibration
+    from optrack.calibration.files import save_calibration, session_file
     from optrack.calibration.session import calibrate_recording
-    from optrack.calibration.truth import floor_view_errors
+    from optrack.calibration.truth import floor_view_errors, truth_errors
     from optrack.recording import Recording
 
     recording = Recording(args.recording)
@@ -183,7 +136,15 @@ def cmd_calibrate_network(args: argparse.Namespace) -> int:
         recording, board, floor=args.floor, network_params=params, progress=info
     )
     network = session.network
-    calibration = _network_file(recording, board, params, session)
+    if not network.world_T_camera:
+        raise CommandError("no sensor could be calibrated.")
+    models = {sid: sensor.model for sid, sensor in recording.sensors.items()}
+    calibration = session_file(
+        session,
+        models,
+        thickness=float(params.board_thickness),
+        notes=f"from recording {recording.path}",
+    )
     backup = save_calibration(args.out, calibration)
     if network.uncalibrated:
         info(
@@ -195,9 +156,16 @@ def cmd_calibrate_network(args: argparse.Namespace) -> int:
             "no board was seen lying on the floor, so the world frame is the camera "
             f"{network.root}'s; lay the board on the floor and run 'optrack calibrate ground'."
         )
-    payload = _network_payload(args.out, backup, calibration.id, session)
+    payload = {
+        "out": str(args.out),
+        "backup": str(backup) if backup else None,
+        "id": calibration.id,
+        **network.as_dict(session.image),
+        "instants": session.instants,
+        "detections": session.detections,
+    }
     payload.update(floor_view_errors(recording, session.timeline))
-    payload.update(_network_truth(recording, network))
+    payload.update(truth_errors(recording, network.world_T_camera, ground=network.world == "floor"))
     if args.json:
         emit_json(payload)
     else:
@@ -211,93 +179,6 @@ def cmd_calibrate_network(args: argparse.Namespace) -> int:
                 f"rotation {payload['max_rotation_error_deg']:.3f} deg"
             )
     return 0
-
-
-def _network_file(recording: Any, board: Checkerboard, params: Params, session: Any) -> Any:
-    """The calibration file of a solved session (every calibrated sensor)."""
-    from optrack.calibration.files import (
-        BoardEntry,
-        CalibrationFile,
-        SensorEntry,
-        new_calibration_id,
-        now_iso,
-    )
-    from optrack.types import as_matrix4
-
-    network = session.network
-    sensors = {}
-    for sid, pose in network.world_T_camera.items():
-        status = network.sensors[sid]
-        sensors[sid] = SensorEntry(
-            world_T_camera=as_matrix4(pose),
-            intrinsics=session.intrinsics[sid],
-            model=recording.sensors[sid].model,
-            image=session.image.get(sid, ""),
-            views=status.used_views,
-            reprojection_rms_px=status.rms_px,
-        )
-    if not sensors:
-        raise CommandError("no sensor could be calibrated.")
-    return CalibrationFile(
-        sensors=sensors,
-        id=new_calibration_id(),
-        created=now_iso(),
-        board=BoardEntry(board.cols, board.rows, board.square, float(params.board_thickness)),
-        world=network.world,
-        quality={
-            "reprojection_rms_px": network.rms_px,
-            "instants": session.instants,
-            "floor_views": network.floor_views,
-            "ground": "floor" if network.world == "floor" else "none",
-        },
-        notes=f"from recording {recording.path}",
-    )
-
-
-def _network_payload(out: str, backup: Path | None, file_id: str, session: Any) -> dict[str, Any]:
-    """``calibrate network``'s JSON: the file written and the solve's figures."""
-    from optrack.types import as_matrix4
-
-    network = session.network
-    return {
-        "out": str(out),
-        "backup": str(backup) if backup else None,
-        "id": file_id,
-        "world": network.world,
-        "sensors": {
-            sid: {
-                "world_T_camera": as_matrix4(network.world_T_camera[sid]),
-                "views": network.sensors[sid].used_views,
-                "rms_px": network.sensors[sid].rms_px,
-                "image": session.image.get(sid, ""),
-            }
-            for sid in sorted(network.world_T_camera)
-        },
-        "uncalibrated": network.uncalibrated,
-        "rms_px": network.rms_px,
-        "instants": session.instants,
-        "floor_views": network.floor_views,
-        "detections": session.detections,
-        "solve_seconds": network.seconds,
-    }
-
-
-def _network_truth(recording: Any, network: Any) -> dict[str, Any]:
-    """The solved poses against the recording's true ones (none without ground truth); the
-    ground's error only when the world frame is the floor."""
-    from optrack.calibration.quality import calibration_errors
-    from optrack.calibration.truth import true_poses
-
-    truth = true_poses(recording)
-    if not truth:
-        return {}
-    errors = calibration_errors(network.world_T_camera, truth).as_dict()
-    if network.world == "floor":
-        return errors
-    return {k: v for k, v in errors.items() if not k.startswith("ground_error")}
-
-
-# ---------------------------------------------------------------------- ground
 
 
 def cmd_calibrate_ground(args: argparse.Namespace) -> int:
@@ -361,10 +242,8 @@ def _floor_from_recording(
     from optrack.calibration.board import Checkerboard
     from optrack.calibration.ground import floor_from_recording
 
-    if calibration.board is not None and not args.board:
-        board = Checkerboard(
-            calibration.board.cols, calibration.board.rows, calibration.board.square
-        )
+    if (known := calibration.board) is not None and not args.board:
+        board = Checkerboard(known.cols, known.rows, known.square)
     else:
         board = _recording_board(args, recording)
     return floor_from_recording(
@@ -378,17 +257,20 @@ def _floor_from_recording(
     )
 
 
-# ---------------------------------------------------------------------- refine
-
-
 def cmd_calibrate_refine(args: argparse.Namespace) -> int:
     """Refine a calibration from one person walking (Algorithm 1)."""
-    from optrack.calibration.files import load_calibration, save_calibration
+    from optrack.calibration.files import (
+        load_calibration,
+        new_calibration_id,
+        now_iso,
+        save_calibration,
+    )
     from optrack.calibration.refinement import (
         REFINEMENT_PARAMS,
         person_trajectories,
         refine_from_trajectories,
     )
+    from optrack.calibration.truth import truth_errors
     from optrack.recording import Recording
 
     recording = Recording(args.recording)
@@ -402,10 +284,30 @@ def cmd_calibrate_refine(args: argparse.Namespace) -> int:
             "person walking (the most confident detection was used)."
         )
     result = refine_from_trajectories(trajectories, params)
-    refined = _refined_file(calibration, result, recording)
+    refined = calibration.with_corrections(
+        result.corrections,
+        id=new_calibration_id(),
+        created=now_iso(),
+        quality={
+            **calibration.quality,
+            "refinement_error_before_m": result.error_before_m,
+            "refinement_error_after_m": result.error_after_m,
+        },
+        notes=f"refined from {calibration.id} with recording {recording.path}",
+    )
     backup = save_calibration(args.out, refined)
-    payload = _refine_payload(args.out, backup, result, trajectories)
-    payload.update(_refine_truth(recording, calibration, refined, result.corrections))
+    payload: dict[str, Any] = {
+        "out": str(args.out),
+        "backup": str(backup) if backup else None,
+        **result.as_dict(),
+        "detections": {sid: len(tr.t) for sid, tr in trajectories.items()},
+    }
+    before = truth_errors(recording, {s: calibration.sensors[s].pose for s in result.corrections})
+    if before:
+        payload["truth_before"] = before
+        payload["truth_after"] = truth_errors(
+            recording, {s: refined.sensors[s].pose for s in result.corrections}
+        )
     if args.json:
         emit_json(payload)
     else:
@@ -416,113 +318,13 @@ def cmd_calibrate_refine(args: argparse.Namespace) -> int:
     return 0
 
 
-def _refined_file(calibration: CalibrationFile, result: Any, recording: Any) -> CalibrationFile:
-    """The calibration with each refined sensor's correction applied (and accumulated in
-    its ``refinement``)."""
-    import numpy as np
-
-    from optrack.calibration.files import CalibrationFile, SensorEntry, new_calibration_id, now_iso
-    from optrack.types import as_matrix4
-
-    sensors = dict(calibration.sensors)
-    for sid, correction in result.corrections.items():
-        entry = sensors[sid]
-        previous = (
-            np.asarray(entry.refinement, dtype=np.float64)
-            if entry.refinement is not None
-            else np.eye(4)
-        )
-        sensors[sid] = SensorEntry(
-            world_T_camera=as_matrix4(correction @ entry.pose),
-            intrinsics=entry.intrinsics,
-            model=entry.model,
-            image=entry.image,
-            refinement=as_matrix4(correction @ previous),
-            views=entry.views,
-            reprojection_rms_px=entry.reprojection_rms_px,
-        )
-    return CalibrationFile(
-        sensors=sensors,
-        id=new_calibration_id(),
-        created=now_iso(),
-        board=calibration.board,
-        world=calibration.world,
-        ground=calibration.ground,
-        quality={
-            **calibration.quality,
-            "refinement_error_before_m": result.error_before_m,
-            "refinement_error_after_m": result.error_after_m,
-        },
-        notes=f"refined from {calibration.id} with recording {recording.path}",
-    )
-
-
-def _refine_payload(
-    out: str, backup: Path | None, result: Any, trajectories: dict[str, Any]
-) -> dict[str, Any]:
-    """``calibrate refine``'s JSON: the file written, the errors, each correction."""
-    import numpy as np
-
-    from optrack.types import as_matrix4
-
-    return {
-        "out": str(out),
-        "backup": str(backup) if backup else None,
-        "error_before_m": result.error_before_m,
-        "error_after_m": result.error_after_m,
-        "error_before_xyz_m": result.error_before_xyz_m,
-        "error_after_xyz_m": result.error_after_xyz_m,
-        "detections": {sid: len(tr.t) for sid, tr in trajectories.items()},
-        "refined": sorted(result.corrections),
-        "skipped": result.skipped,
-        "corrections": {
-            sid: {
-                "translation_m": float(np.linalg.norm(c[:3, 3])),
-                "matrix": as_matrix4(c),
-            }
-            for sid, c in result.corrections.items()
-        },
-    }
-
-
-def _refine_truth(
-    recording: Any, before: CalibrationFile, after: CalibrationFile, refined: Any
-) -> dict[str, Any]:
-    """The refined sensors' errors against the recording's true poses, before and after
-    (none without ground truth)."""
-    from optrack.calibration.quality import calibration_errors
-    from optrack.calibration.truth import true_poses
-
-    truth = true_poses(recording)
-    if not truth:
-        return {}
-    return {
-        "truth_before": calibration_errors(
-            {sid: before.sensors[sid].pose for sid in refined}, truth
-        ).as_dict(),
-        "truth_after": calibration_errors(
-            {sid: after.sensors[sid].pose for sid in refined}, truth
-        ).as_dict(),
-    }
-
-
-# ----------------------------------------------------------------------- truth
-
-
 def cmd_calibrate_truth(args: argparse.Namespace) -> int:
     """Write a recording's true sensor poses as a calibration file, optionally perturbed
     (to measure refinement, or to track with a known calibration)."""
-    from optrack.calibration.files import (
-        CalibrationFile,
-        SensorEntry,
-        new_calibration_id,
-        now_iso,
-        save_calibration,
-    )
+    from optrack.calibration.files import CalibrationFile, save_calibration
     from optrack.calibration.synthetic import perturb_poses
     from optrack.calibration.truth import recorded_poses
     from optrack.recording import Recording
-    from optrack.types import as_matrix4
 
     recording = Recording(args.recording)
     truth = recorded_poses(recording)
@@ -540,18 +342,9 @@ def cmd_calibrate_truth(args: argparse.Namespace) -> int:
                 f"--perturb must be METRES,DEGREES, e.g. 0.1,2; got '{args.perturb}'."
             ) from None
         truth = perturb_poses(truth, translation, rotation, seed=args.seed)
-    sensors = {
-        sid: SensorEntry(
-            world_T_camera=as_matrix4(pose),
-            intrinsics=recording.sensors[sid].intrinsics,
-            model=recording.sensors[sid].model,
-        )
-        for sid, pose in truth.items()
-    }
-    calibration = CalibrationFile(
-        sensors=sensors,
-        id=new_calibration_id(),
-        created=now_iso(),
+    calibration = CalibrationFile.of_poses(
+        truth,
+        recording.sensors,
         world="floor",
         quality={"perturbation_m": translation, "perturbation_deg": rotation},
         notes=f"true poses of recording {recording.path}"
@@ -563,15 +356,15 @@ def cmd_calibrate_truth(args: argparse.Namespace) -> int:
             {
                 "out": str(args.out),
                 "backup": str(backup) if backup else None,
-                "sensors": sorted(sensors),
+                "sensors": sorted(calibration.sensors),
             }
         )
     else:
-        info(f"wrote {args.out}: the true poses of {len(sensors)} sensors ({calibration.notes})")
+        info(
+            f"wrote {args.out}: the true poses of {len(calibration.sensors)} sensors "
+            f"({calibration.notes})"
+        )
     return 0
-
-
-# ----------------------------------------------------------------------- board
 
 
 def cmd_calibrate_board(args: argparse.Namespace) -> int:
@@ -593,9 +386,6 @@ def cmd_calibrate_board(args: argparse.Namespace) -> int:
     else:
         info(f"wrote {args.out} ({page[0]:.0f} x {page[1]:.0f} mm): {board.describe()}")
     return 0
-
-
-# ---------------------------------------------------------------------- export
 
 
 def cmd_calibrate_export(args: argparse.Namespace) -> int:
@@ -625,9 +415,6 @@ def cmd_calibrate_export(args: argparse.Namespace) -> int:
     return 0
 
 
-# -------------------------------------------------------------------- commands
-
-
 def add_commands(commands: Any, command: Any) -> None:
     """Declare ``optrack calibrate`` and its steps on the ``optrack`` parser (see
     optrack/cli.py); each step's handler is named ``cmd_calibrate_<step>``."""
@@ -638,6 +425,14 @@ def add_commands(commands: Any, command: Any) -> None:
     )
     p.set_defaults(handler=lambda a: _usage(p))
     calibrate = p.add_subparsers(dest="calibrate_command", metavar="STEP")
+    _add_image_steps(calibrate, command)
+    _add_network_steps(calibrate, command)
+    _add_file_steps(calibrate, command)
+    _add_live_step(calibrate, command)
+
+
+def _add_image_steps(calibrate: Any, command: Any) -> None:
+    """The steps that read chessboard images: one camera's intrinsics, a stereo pair."""
     q = command(
         "intrinsics",
         "Intrinsics of one camera from chessboard images.",
@@ -666,6 +461,10 @@ def add_commands(commands: Any, command: Any) -> None:
     q.add_argument("--left", nargs="+", required=True, help="left images")
     q.add_argument("--right", nargs="+", required=True, help="right images (same order)")
     add_json(q)
+
+
+def _add_network_steps(calibrate: Any, command: Any) -> None:
+    """The steps that read recordings: the network, its refinement, its world frame."""
     q = command(
         "network",
         "Calibrate every sensor of a recording (checkerboard, ground).",
@@ -721,6 +520,10 @@ def add_commands(commands: Any, command: Any) -> None:
     )
     q.add_argument("--floor", default="auto", help="views on the floor: auto, all, after:SECONDS")
     add_json(q)
+
+
+def _add_file_steps(calibrate: Any, command: Any) -> None:
+    """The steps that write files: a printable board, exports, a recording's true poses."""
     q = command(
         "board",
         "Write a printable checkerboard (PDF or PNG) with its size printed on it.",
@@ -755,6 +558,10 @@ def add_commands(commands: Any, command: Any) -> None:
     q.add_argument("--perturb", metavar="M,DEG", help="move each sensor M metres, turn it DEG")
     q.add_argument("--seed", type=int, default=0, help="seed of the perturbation's directions")
     add_json(q)
+
+
+def _add_live_step(calibrate: Any, command: Any) -> None:
+    """The calibration wizard without a window (its handler is the runtime's)."""
     q = command(
         "live",
         "The calibration wizard without a window: extrinsics, floor, refinement on a running site.",

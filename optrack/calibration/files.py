@@ -34,6 +34,7 @@ import os
 import secrets
 from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import msgspec
 import numpy as np
@@ -43,6 +44,9 @@ from optrack.errors import UserError
 from optrack.geometry import invert, pose_to_quaternion
 from optrack.io.files import atomic_write_bytes, atomic_write_text
 from optrack.types import Intrinsics, Matrix4, NetworkCalibration, SensorCalibration, as_matrix4
+
+if TYPE_CHECKING:
+    from optrack.calibration.session import SessionResult
 
 __all__ = [
     "FORMAT_NAME",
@@ -58,6 +62,7 @@ __all__ = [
     "openptrack_camera_poses",
     "ros_static_transforms",
     "save_calibration",
+    "session_file",
 ]
 
 FORMAT_NAME = "optrack-calibration"
@@ -155,6 +160,22 @@ class CalibrationFile(msgspec.Struct, forbid_unknown_fields=True):
             notes=self.id,
         )
 
+    @classmethod
+    def of_poses(
+        cls, world_T_camera: Mapping[str, np.ndarray], infos: Mapping[str, Any], **fields: Any
+    ) -> CalibrationFile:
+        """A new file (a fresh id, created now) of known poses, e.g. a recording's true ones;
+        each sensor's intrinsics and model from ``infos`` (its recorded sensor info)."""
+        sensors = {
+            sid: SensorEntry(
+                world_T_camera=as_matrix4(pose),
+                intrinsics=infos[sid].intrinsics,
+                model=infos[sid].model,
+            )
+            for sid, pose in world_T_camera.items()
+        }
+        return cls(sensors=sensors, id=new_calibration_id(), created=now_iso(), **fields)
+
     def with_poses(
         self, world_T_camera: Mapping[str, np.ndarray], **fields: object
     ) -> CalibrationFile:
@@ -163,6 +184,60 @@ class CalibrationFile(msgspec.Struct, forbid_unknown_fields=True):
         for sid, pose in world_T_camera.items():
             sensors[sid] = msgspec.structs.replace(sensors[sid], world_T_camera=as_matrix4(pose))
         return msgspec.structs.replace(self, sensors=sensors, **fields)
+
+    def with_corrections(
+        self, corrections: Mapping[str, np.ndarray], **fields: object
+    ) -> CalibrationFile:
+        """A copy with each correction (world_T_world, 4x4) applied to its sensor's pose and
+        accumulated in the sensor's ``refinement`` (other fields kept)."""
+        sensors = dict(self.sensors)
+        for sid, correction in corrections.items():
+            entry = sensors[sid]
+            previous = (
+                np.asarray(entry.refinement, dtype=np.float64)
+                if entry.refinement is not None
+                else np.eye(4)
+            )
+            sensors[sid] = msgspec.structs.replace(
+                entry,
+                world_T_camera=as_matrix4(correction @ entry.pose),
+                refinement=as_matrix4(correction @ previous),
+            )
+        return msgspec.structs.replace(self, sensors=sensors, **fields)
+
+
+def session_file(
+    session: SessionResult, models: Mapping[str, str], *, thickness: float, notes: str = ""
+) -> CalibrationFile:
+    """The calibration file of a calibrated recording: every calibrated sensor (``models``:
+    each sensor's model), the board (its face ``thickness`` m above the floor when laid on
+    it), the world and the solve's quality."""
+    network, board = session.network, session.board
+    sensors = {
+        sid: SensorEntry(
+            world_T_camera=as_matrix4(pose),
+            intrinsics=session.intrinsics[sid],
+            model=models[sid],
+            image=session.image.get(sid, ""),
+            views=network.sensors[sid].used_views,
+            reprojection_rms_px=network.sensors[sid].rms_px,
+        )
+        for sid, pose in network.world_T_camera.items()
+    }
+    return CalibrationFile(
+        sensors=sensors,
+        id=new_calibration_id(),
+        created=now_iso(),
+        board=BoardEntry(board.cols, board.rows, board.square, float(thickness)),
+        world=network.world,
+        quality={
+            "reprojection_rms_px": network.rms_px,
+            "instants": session.instants,
+            "floor_views": network.floor_views,
+            "ground": "floor" if network.world == "floor" else "none",
+        },
+        notes=notes,
+    )
 
 
 def new_calibration_id(now: datetime.datetime | None = None) -> str:

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import yaml
 
 from optrack.calibration.board import (
     CORNER_PARAMS,
@@ -22,6 +23,7 @@ from optrack.calibration.board import (
     find_corners,
 )
 from optrack.errors import UserError
+from optrack.io.files import atomic_write_text
 from optrack.params import Param, Params, Schema, register
 from optrack.types import Intrinsics
 
@@ -127,6 +129,34 @@ class IntrinsicsResult:
             "coverage": self.coverage.fraction,
             "coverage_map": self.coverage.as_lists(),  # corners per cell, rows top to bottom
         }
+
+    def describe(self, labels: Sequence[str]) -> str:
+        """One line for the operator: the intrinsics, the RMS, the views rejected (by their
+        ``labels``) and the image's coverage."""
+        k = self.intrinsics
+        rejected = ", ".join(labels[i] for i in self.rejected)
+        return (
+            f"fx={k.fx:.2f} fy={k.fy:.2f} cx={k.cx:.2f} cy={k.cy:.2f} dist={[round(float(v), 5) for v in k.dist]} "
+            f"RMS {self.rms:.3f} px over {len(self.used)} views"
+            + (f"; rejected {rejected}" if self.rejected else "")
+            + f"; coverage {self.coverage.fraction:.0%} of the image"
+        )
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """The intrinsics, their RMS and the views used, as a small YAML file."""
+        k = self.intrinsics
+        fields = {
+            "fx": k.fx,
+            "fy": k.fy,
+            "cx": k.cx,
+            "cy": k.cy,
+            "width": k.width,
+            "height": k.height,
+            "dist": list(k.dist),
+            "rms_px": self.rms,
+            "views": len(self.used),
+        }
+        atomic_write_text(path, yaml.safe_dump(fields, sort_keys=False))
 
 
 def _flags(p: Params) -> int:

@@ -34,7 +34,7 @@ from optrack.calibration.views import (
 from optrack.errors import UserError
 from optrack.geometry import invert, make_pose
 from optrack.params import Param, Params, Schema, register
-from optrack.types import Intrinsics
+from optrack.types import Intrinsics, as_matrix4
 
 __all__ = [
     "FLOOR_KEY",
@@ -211,6 +211,27 @@ class NetworkResult:
     floor_views: int
     seconds: float
     anchor: int | None = None  # the floor instant that sets the world frame
+
+    def as_dict(self, images: Mapping[str, str] | None = None) -> dict[str, object]:
+        """The world, each calibrated sensor (pose, views used, RMS and, from ``images``,
+        the image its board was found in), the uncalibrated ones and the solve's figures."""
+        images = images or {}
+        return {
+            "world": self.world,
+            "sensors": {
+                sid: {
+                    "world_T_camera": as_matrix4(self.world_T_camera[sid]),
+                    "views": self.sensors[sid].used_views,
+                    "rms_px": self.sensors[sid].rms_px,
+                    "image": images.get(sid, ""),
+                }
+                for sid in sorted(self.world_T_camera)
+            },
+            "uncalibrated": self.uncalibrated,
+            "rms_px": self.rms_px,
+            "floor_views": self.floor_views,
+            "solve_seconds": self.seconds,
+        }
 
 
 # --------------------------------------------------------------- calibrator

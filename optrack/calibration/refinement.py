@@ -44,6 +44,7 @@ import open3d as o3d
 
 from optrack.errors import UserError
 from optrack.params import Param, Params, Schema, register
+from optrack.types import as_matrix4
 
 __all__ = [
     "REFINEMENT_PARAMS",
@@ -181,6 +182,21 @@ class RefinementResult:
     error_after_xyz_m: float
     skipped: list[str]
     average_points: int
+
+    def as_dict(self) -> dict[str, object]:
+        """The errors, the sensors refined and skipped, and each correction."""
+        return {
+            "error_before_m": self.error_before_m,
+            "error_after_m": self.error_after_m,
+            "error_before_xyz_m": self.error_before_xyz_m,
+            "error_after_xyz_m": self.error_after_xyz_m,
+            "refined": sorted(self.corrections),
+            "skipped": self.skipped,
+            "corrections": {
+                sid: {"translation_m": float(np.linalg.norm(c[:3, 3])), "matrix": as_matrix4(c)}
+                for sid, c in self.corrections.items()
+            },
+        }
 
 
 def _interpolate(trajectory: Trajectory, t: np.ndarray, max_gap: float) -> np.ndarray:

@@ -11,7 +11,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["floor_view_errors", "recorded_poses", "true_poses"]
+from optrack.calibration.quality import calibration_errors
+
+__all__ = ["floor_view_errors", "recorded_poses", "true_poses", "truth_errors"]
 
 
 def recorded_poses(recording: Any) -> dict[str, np.ndarray]:
@@ -26,6 +28,21 @@ def recorded_poses(recording: Any) -> dict[str, np.ndarray]:
 def true_poses(recording: Any) -> dict[str, np.ndarray]:
     """The sensors' true poses, when the recording has ground truth (else none)."""
     return recorded_poses(recording) if recording.has_ground_truth else {}
+
+
+def truth_errors(
+    recording: Any, world_T_camera: dict[str, np.ndarray], *, ground: bool = True
+) -> dict[str, Any]:
+    """Poses against the recording's true ones (:func:`calibration_errors`' figures; none
+    without ground truth); the ground's error only with ``ground`` (a world frame on the
+    floor)."""
+    truth = true_poses(recording)
+    if not truth:
+        return {}
+    errors = calibration_errors(world_T_camera, truth).as_dict()
+    if ground:
+        return errors
+    return {k: v for k, v in errors.items() if not k.startswith("ground_error")}
 
 
 def floor_view_errors(recording: Any, timeline: list[tuple[float, bool]]) -> dict[str, int]:
