@@ -13,7 +13,7 @@ from typing import Any
 
 from optrack.cli import _usage
 
-__all__ = ["add_commands", "cmd_node_detect", "cmd_node_track", "cmd_run"]
+__all__ = ["add_commands", "cmd_calibrate_live", "cmd_node_detect", "cmd_node_track", "cmd_run"]
 
 
 def cmd_node_detect(args: argparse.Namespace) -> int:
@@ -104,3 +104,52 @@ def add_commands(commands: Any, command: Any) -> None:
     )
     q.add_argument("--site", required=True, help="site name")
     q.add_argument("--config", help="YAML configuration")
+
+
+def cmd_calibrate_live(args: argparse.Namespace) -> int:
+    """``optrack calibrate live``: the calibration wizard without a window, against a
+    running site: extrinsics, floor, (refinement), then save and publish."""
+    import time
+
+    from optrack.calibration.board import Checkerboard
+    from optrack.cli import emit_json, info
+    from optrack.net.bus import Bus
+    from optrack.runtime.calibration_headless import HeadlessPlan, calibrate_headless
+    from optrack.runtime.calibration_live import LiveCalibration
+    from optrack.runtime.config import load_node_config
+
+    config = load_node_config(args.config)  # knows calibration_live: imported above
+    site = args.site or str(config["site"].name)
+    board = Checkerboard.parse(args.board, args.square)
+    board.require_asymmetric()
+    plan = HeadlessPlan(
+        out=args.out,
+        extrinsics_s=float(args.extrinsics_seconds),
+        min_views=int(args.min_views),
+        floor_s=float(args.floor_seconds),
+        floor_views=int(args.floor_views),
+        refine_s=float(args.refine_seconds),
+        publish=not args.no_publish,
+    )
+    bus = Bus(site, "calibrate", config["bus"])
+    live = None
+    try:
+        started = time.monotonic()
+        live = LiveCalibration(bus, board, params=config.params.get("calibration_live"))
+        connect_s = time.monotonic() - started
+        simulated = " (simulated: its operator moves the board)" if live.simulated else ""
+        info(f"site '{site}': sensors {', '.join(live.sensors)}{simulated}")
+        payload = calibrate_headless(live, plan, info, connect_s)
+    finally:
+        if live is not None:
+            live.close()
+        bus.close()
+    if args.json:
+        emit_json(payload)
+    else:
+        sent = f"; sent to the nodes of site '{site}'" if plan.publish else ""
+        info(
+            f"wrote {payload['out']}: {len(payload['sensors'])} sensors, RMS "
+            f"{payload['rms_px']:.3f} px, world: {payload['world']}{sent}"
+        )
+    return 0

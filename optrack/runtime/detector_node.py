@@ -22,7 +22,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -32,7 +32,7 @@ from optrack.net.clock import ClockSync
 from optrack.net.messages import CalibrationMessage, DetectionsMessage, Message
 from optrack.params import Params
 from optrack.recording import SensorInfo
-from optrack.runtime.calibration_capture import CalibrationCapture, SceneSwitch
+from optrack.runtime.board_capture import CalibrationCapture
 from optrack.runtime.calibration_store import CalibrationStore
 from optrack.runtime.node import Node, RateMeter
 from optrack.runtime.node_recording import NodePlayback, NodeRecorder
@@ -40,6 +40,9 @@ from optrack.runtime.preview import make_preview
 from optrack.runtime.replay import LiveReplay
 from optrack.sensors.base import Sensor
 from optrack.types import DetectionBatch, NetworkCalibration, RGBDFrame
+
+if TYPE_CHECKING:
+    from optrack.sim.operator import SceneSwitch
 
 __all__ = [
     "CalibrationRequest",
@@ -138,8 +141,10 @@ class DetectorNode(Node):
         self.capture = CalibrationCapture(bus, self.info, sync, on_streams=self._need_stream)
         self.capture.register(self.add_command)
         self.live["calibration_capture"] = self.capture.params
-        self.scene = SceneSwitch(sensor)  # a simulated site's operator (calibration wizard)
-        self.scene.register(self.add_command)
+        # A simulated site's operator (calibration wizard) moves the node onto its scenes;
+        # its switch is made (and the simulator loaded) when it first asks.
+        self.scene: SceneSwitch | None = None
+        self.add_command("sim_scene", self._sim_scene)
         # Recording and playback commands (optrack.runtime.node_recording).
         self.recorder = NodeRecorder(self, self.info)
         self.playback = NodePlayback(self, sensor) if isinstance(sensor, LiveReplay) else None
@@ -193,7 +198,18 @@ class DetectorNode(Node):
         ):
             self._set_streams()
 
+    def _sim_scene(self, args: dict[str, Any]) -> dict[str, Any]:
+        """``sim_scene {uri}``: read this sensor of a simulated operator's scene from the
+        next frame (optrack.sim.operator.SceneSwitch)."""
+        if self.scene is None:
+            from optrack.sim.operator import SceneSwitch
+
+            self.scene = SceneSwitch(self.sensor)
+        return self.scene.command(args)
+
     def _take_scene(self) -> None:
+        if self.scene is None:
+            return
         sensor = self.scene.take(self.report_error)
         if sensor is None:
             return

@@ -333,13 +333,14 @@ class Site:
     # ------------------------------------------------- the simulated operator
     def _attach_operator(self, uris: list[str]) -> None:
         """On a simulated site, answer the ``operator`` command (calibration wizard)."""
-        from optrack.runtime.calibration_capture import SimulatedOperator
+        from optrack.runtime.node import send_command
+        from optrack.sim.operator import SimulatedOperator
 
         assert self.hub is not None and self._run_dir is not None
         names = [c.name for c in self.children if c.role == "detector"]
         self.operator = SimulatedOperator.for_site(self.params, uris, names, self._run_dir)
         if self.operator is not None:
-            self.operator.serve(self.hub)
+            self.operator.serve(self.hub, send_command)
 
     # ----------------------------------------------------------- supervision
     def supervise_once(self, now: float) -> None:

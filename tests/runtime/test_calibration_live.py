@@ -20,11 +20,12 @@ import yaml
 
 from optrack.calibration.board import Checkerboard
 from optrack.calibration.files import load_calibration
-from optrack.calibration.live import LiveCalibration, LiveCalibrationError, LiveState
+from optrack.calibration.live import LiveCalibrationError, LiveState
 from optrack.calibration.quality import calibration_errors
 from optrack.errors import UserError
 from optrack.net.bus import Bus
 from optrack.net.config import BUS_PARAMS
+from optrack.runtime.calibration_live import LiveCalibration
 from optrack.sim.world import Simulation
 
 SENSORS = 3

@@ -1,0 +1,149 @@
+"""The simulated operator of a simulated site (optrack.sim.operator), over loopback: its
+scenes keep the site's sensors where they are, it carries the site's board, and refused
+actions come back as one sentence."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from optrack.runtime.config import NODE_PARAMS
+from optrack.runtime.node import CommandError, Node, send_command
+from optrack.runtime.site_params import SITE_PARAMS
+from optrack.sim.operator import SceneSwitch, SimulatedOperator
+from optrack.sim.sensor import SimulatedSensor
+from optrack.sim.world import Simulation
+
+BOARD = {"cols": 6, "rows": 5, "square": 0.15}
+
+
+def test_the_simulated_operator_moves_every_node_into_a_scene_of_the_same_sensors(
+    hub, make_client, tmp_path
+):
+    uris = [f"sim://calibration/{k}?sensors=3&id=cam{k}" for k in range(3)]
+    site = SITE_PARAMS.create({"sensors": ",".join(uris)})
+    operator = SimulatedOperator.for_site(site, uris, ["cam0", "cam1", "cam2"], tmp_path)
+    assert operator is not None
+    operator.serve(hub, send_command)
+    nodes, switches = [], []
+    for k, uri in enumerate(uris):
+        own = SimulatedSensor.from_uri(uri)
+        node = Node(hub, f"cam{k}", NODE_PARAMS.create(), {})
+        switch = SceneSwitch(own)
+        switch.register(node.add_command)
+        nodes.append(node)
+        switches.append(switch)
+    client = make_client("wizard")
+    try:
+        with pytest.raises(CommandError, match="cannot 'dance'"):
+            send_command(client, "site", "operator", {"action": "dance"})
+        with pytest.raises(CommandError, match="8x6"):
+            send_command(client, "site", "operator", {"action": "move_board", "cols": 8, "rows": 6})
+        reply = send_command(client, "site", "operator", {"action": "lay_board", **BOARD})
+        assert reply["scene"].endswith("lay_board")
+        taken: list = [None] * 3
+        deadline = time.monotonic() + 30
+        while any(t is None for t in taken) and time.monotonic() < deadline:
+            for k, switch in enumerate(switches):
+                taken[k] = taken[k] or switch.take(lambda sentence: None)
+            time.sleep(0.05)
+        truth = Simulation("calibration", sensors=3).sensors
+        for k, sensor in enumerate(taken):
+            assert sensor is not None and reply["scene"] in sensor.info.uri
+            assert sensor.info.id == f"cam{k}"
+            assert np.allclose(sensor.info.world_T_camera, truth[k].world_T_camera)
+            assert sensor.simulation.scenario.people.count == 0
+            assert [s.kind for s in sensor.simulation.operator.steps].count("floor") == 3
+            assert sensor.simulation.operator.params.hold_seconds == 5.0
+        assert operator.status_values()["operator"] == "lay_board"
+        send_command(client, "site", "operator", {"action": "people"})
+        deadline = time.monotonic() + 10
+        back = None
+        while back is None and time.monotonic() < deadline:
+            back = switches[0].take(lambda sentence: None)
+            time.sleep(0.05)
+        assert back is switches[0].own
+    finally:
+        for node in nodes:
+            node.close()
+
+
+def test_the_simulated_operator_shows_the_board_to_one_sensor_all_over_its_image(
+    hub, make_client, tmp_path
+):
+    """The intrinsics page's scene: every placement is seen whole by the one sensor asked
+    for, the board's centre in several cells of its image and turned several ways."""
+    from optrack.geometry import invert, transform_points
+
+    uris = [f"sim://calibration/{k}?sensors=2&id=cam{k}" for k in range(2)]
+    site = SITE_PARAMS.create({"sensors": ",".join(uris)})
+    operator = SimulatedOperator.for_site(site, uris, ["cam0", "cam1"], tmp_path)
+    operator.serve(hub, send_command)
+    nodes, switches = [], []
+    for k, uri in enumerate(uris):
+        node = Node(hub, f"cam{k}", NODE_PARAMS.create(), {})
+        switch = SceneSwitch(SimulatedSensor.from_uri(uri))
+        switch.register(node.add_command)
+        nodes.append(node)
+        switches.append(switch)
+    client = make_client("wizard")
+    try:
+        with pytest.raises(CommandError, match="one of the site's sensors"):
+            send_command(client, "site", "operator", {"action": "show_board", "sensor": "cam7"})
+        reply = send_command(
+            client, "site", "operator", {"action": "show_board", "sensor": "cam1", **BOARD}
+        )
+        assert reply["scene"].endswith("show_board")
+        deadline, sensor = time.monotonic() + 30, None
+        while sensor is None and time.monotonic() < deadline:
+            sensor = switches[1].take(lambda sentence: None)
+            time.sleep(0.05)
+        assert sensor is not None and reply["scene"] in sensor.info.uri
+    finally:
+        for node in nodes:
+            node.close()
+    steps = sensor.simulation.operator.steps
+    assert len(steps) == 9 and all(s.kind == "hold" and s.sensors == (1,) for s in steps)
+    assert sensor.simulation.operator.params.hold_seconds == 1.5
+    truth = Simulation("calibration", sensors=2).sensors[1]
+    k = truth.model.intrinsics
+    cells, turns = set(), []
+    for step in steps:
+        centre = transform_points(invert(truth.world_T_camera), step.world_T_board[:3, 3][None])[0]
+        u, v = k.fx * centre[0] / centre[2] + k.cx, k.fy * centre[1] / centre[2] + k.cy
+        assert 0 <= u < k.width and 0 <= v < k.height
+        cells.add((int(3 * u / k.width), int(3 * v / k.height)))
+        # The printed face looks along -z of the board; the angle it makes with the camera.
+        to_camera = truth.world_T_camera[:3, 3] - step.world_T_board[:3, 3]
+        cos = -step.world_T_board[:3, 2] @ to_camera / np.linalg.norm(to_camera)
+        turns.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    assert len(cells) >= 3
+    assert max(turns) - min(turns) >= 20.0
+
+
+def test_the_simulated_operator_carries_the_sites_board_and_needs_one(tmp_path):
+    """The board is the command's; what the command leaves out comes from the site
+    scenario's board (no board size of the operator's own); a site whose scenario has no
+    board needs the command to give it whole."""
+    import yaml
+
+    from optrack.errors import UserError
+
+    venue = [f"sim://mixed/{k}?id=cam{k}" for k in range(2)]
+    site = SITE_PARAMS.create({"sensors": ",".join(venue)})
+    operator = SimulatedOperator.for_site(site, venue, ["cam0", "cam1"], tmp_path)
+    with pytest.raises(UserError, match="needs the board's cols") as refused:
+        operator.command({"action": "move_board"})
+    assert str(refused.value).endswith(".")
+    uris = [f"sim://calibration/{k}?sensors=2&id=cam{k}" for k in range(2)]
+    site = SITE_PARAMS.create({"sensors": ",".join(uris)})
+    operator = SimulatedOperator.for_site(site, uris, ["cam0", "cam1"], tmp_path)
+    reply = operator.command({"action": "lay_board", "cols": 8})
+    scene = tmp_path / f"{reply['scene']}.yaml"
+    deadline = time.monotonic() + 30
+    while not scene.is_file() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    board = yaml.safe_load(scene.read_text())["board"]
+    assert (board["cols"], board["rows"], board["square"]) == (8, 5, 0.15)
