@@ -62,7 +62,10 @@ def signed_distance(points: np.ndarray, geometry: np.ndarray) -> tuple[np.ndarra
 
 
 def associate(
-    points: np.ndarray, geometry: np.ndarray, alpha: float, baseline: np.ndarray | None = None
+    points: np.ndarray,
+    geometry: np.ndarray,
+    alpha: float,
+    baseline: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Eq. 8: each point's distance to its part, min(|d|, alpha) (P, N), and its area of
     interest ``2 k + half`` (-1: clutter, or better explained by the ``baseline``)."""
@@ -100,7 +103,9 @@ def log_likelihood_numpy(
 
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
-def _kernel(px, py, pz, baseline, geometry, expected, inv_two_sigma2, alpha, weight, out):
+def _kernel(px, py, pz, baseline, geometry, expected, consts, out):
+    """consts: 1 / (2 sigma^2), alpha, support_weight."""
+    inv_two_sigma2, alpha, weight = consts[0], np.float32(consts[1]), consts[2]
     n = px.shape[0]
     parts = geometry.shape[1]
     for p in numba.prange(geometry.shape[0]):
@@ -113,7 +118,7 @@ def _kernel(px, py, pz, baseline, geometry, expected, inv_two_sigma2, alpha, wei
             s0, s1, r0, dr, inv_length = g[12], g[13], g[14], g[15], g[16]
             half = np.float32(0.5) / inv_length
             near, far = np.int32(2 * k), np.int32(2 * k + 1)
-            for i in range(n):  # branch-free, so that it vectorises
+            for i in range(n):  # no branches, so that it vectorises
                 vx, vy, vz = px[i] - ax, py[i] - ay, pz[i] - az
                 s = vx * ux + vy * uy + vz * uz
                 e = vx * ex + vy * ey + vz * ez
@@ -166,9 +171,7 @@ def log_likelihood(
         base,
         geometry,
         np.asarray(expected, dtype=np.float64).reshape(-1),
-        1.0 / (2.0 * sigma * sigma),
-        np.float32(alpha),
-        float(support_weight),
+        np.array([1.0 / (2.0 * sigma * sigma), alpha, support_weight]),
         out,
     )
     return out

@@ -1,0 +1,234 @@
+"""MDCA's annealed particle filter with partitioned sampling (§IV).
+
+Each frame: every particle takes a Gaussian random-walk step (per-joint
+agility times the time since the last frame); then the five partitions are
+annealed in turn, torso first, then the left arm, right arm, left leg, right
+leg. Annealing a partition (Deutscher's annealed particle filter) repeats
+``layers`` times: weigh the particles by the likelihood of that partition's
+parts raised to an exponent chosen so that ``survival_rate`` of them stay
+effective, resample that partition's numbers, and diffuse them by a spread
+shrinking by ``anneal_decay`` each layer. The weighted mean of the last layer
+is the partition's estimate; the next partitions are scored with it fixed
+(its parts explain the points they can, and a limb only competes for the rest).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from optrack.params import Params
+from optrack.skeleton.likelihood import associate, log_likelihood
+from optrack.skeleton.model import (
+    FRAMES,
+    LIMITS,
+    PARTITIONS,
+    PARTS,
+    BodyShape,
+    D,
+    forward_kinematics,
+    part_areas,
+    part_geometry,
+    part_reach,
+)
+from optrack.skeleton.params import SKELETON_PARAMS
+
+__all__ = [
+    "PARTITION_FRAMES",
+    "PARTITION_PARTS",
+    "SkeletonFilter",
+    "annealing_exponent",
+    "motion_spread",
+    "systematic_resample",
+]
+
+# The parts each partition is scored on: the torso on the whole body (its limbs at each
+# particle's predicted angles), so that the trunk cannot slide onto the legs' points;
+# each limb on its own parts, the rest fixed.
+PARTITION_PARTS: dict[str, np.ndarray] = {
+    name: np.array([k for k, part in enumerate(PARTS) if name == "torso" or part.partition == name])
+    for name in PARTITIONS
+}
+# The frames each limb's angles turn (the torso recomputes them all).
+PARTITION_FRAMES: dict[str, tuple[str, ...]] = {
+    "torso": FRAMES,
+    "left_arm": ("left_shoulder", "left_elbow"),
+    "right_arm": ("right_shoulder", "right_elbow"),
+    "left_leg": ("left_hip", "left_knee"),
+    "right_leg": ("right_hip", "right_knee"),
+}
+_ROOT_JOINT = {"left_arm": 4, "right_arm": 7, "left_leg": 10, "right_leg": 13}
+_YAW = 3
+
+
+def motion_spread(params: Params, dt: float) -> np.ndarray:
+    """Standard deviation of the random-walk step of each state number over ``dt`` s, (D,)."""
+    dt = min(max(float(dt), 0.0), float(params.max_dt))
+    spread = np.empty(D)
+    spread[0:3] = params.agility_root_m
+    spread[3:6] = params.agility_root_rad
+    spread[6:12] = params.agility_torso_rad
+    spread[12:20] = params.agility_arms_rad
+    spread[20:28] = params.agility_legs_rad
+    return spread * dt
+
+
+def annealing_exponent(log_weights: np.ndarray, survival_rate: float) -> float:
+    """The exponent beta for which the weights exp(beta * log_weights) keep an effective
+    sample size of ``survival_rate`` times the particle count (bisection in log beta)."""
+    centred = np.asarray(log_weights, dtype=np.float64) - np.max(log_weights)
+    if not np.any(centred < -1e-12):
+        return 1.0
+    target = survival_rate * len(centred)
+    low, high = -6.0, 8.0  # log10 of beta
+    for _ in range(40):
+        mid = 0.5 * (low + high)
+        w = np.exp(10.0**mid * centred)
+        ess = w.sum() ** 2 / np.sum(w * w)
+        if ess > target:
+            low = mid
+        else:
+            high = mid
+    return float(10.0**low)
+
+
+def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Indices of a systematic resampling of normalised weights."""
+    n = len(weights)
+    positions = (rng.random() + np.arange(n)) / n
+    cumulative = np.cumsum(weights)
+    cumulative[-1] = 1.0
+    return np.searchsorted(cumulative, positions)
+
+
+def _weighted_mean(values: np.ndarray, weights: np.ndarray, dims: tuple[int, ...]) -> np.ndarray:
+    mean = weights @ values
+    if _YAW in dims:  # an angle without limits: the circular mean
+        j = dims.index(_YAW)
+        mean[j] = np.arctan2(weights @ np.sin(values[:, j]), weights @ np.cos(values[:, j]))
+    return mean
+
+
+class SkeletonFilter:
+    """The particle set and the estimate of one person's pose (see the module docstring)."""
+
+    def __init__(
+        self, shape: BodyShape, params: Params | None = None, seed: int | None = None
+    ) -> None:
+        self.shape = shape
+        self.params = params if params is not None else SKELETON_PARAMS.create()
+        self.rng = np.random.default_rng(seed)
+        self.estimate = np.zeros(D)
+        self.particles = np.zeros((int(self.params.particles), D))
+        self._areas = part_areas(shape)
+
+    def reset(self, state: np.ndarray, spread: np.ndarray | float = 0.0) -> None:
+        """Put every particle at ``state`` plus Gaussian noise of ``spread`` per number."""
+        n = int(self.params.particles)
+        self.estimate = np.asarray(state, dtype=np.float64).copy()
+        noise = self.rng.normal(size=(n, D)) * np.broadcast_to(spread, (D,))
+        self.particles = _clamp(self.estimate[None, :] + noise)
+
+    def expected_support(self, n_points: int) -> np.ndarray:
+        """Points each area of interest should hold, (K, 2)."""
+        share = self._areas / self._areas.sum() * n_points * float(self.params.support_fraction)
+        return np.repeat(share[:, None] / 2.0, 2, axis=1)
+
+    def step(self, points: np.ndarray, dt: float) -> np.ndarray:
+        """One frame: predict, then anneal each partition in turn; returns the estimate (D,)."""
+        if len(self.particles) != int(self.params.particles):
+            self.reset(self.estimate)
+        spread = motion_spread(self.params, dt)
+        self.particles = _clamp(
+            self.particles + self.rng.normal(size=self.particles.shape) * spread
+        )
+        for name in PARTITIONS:
+            self.anneal(points, name, int(self.params.layers), spread)
+        return self.estimate.copy()
+
+    def anneal(self, points: np.ndarray, partition: str, layers: int, spread: np.ndarray) -> None:
+        """Anneal one partition's numbers against ``points`` (N, 3), the partitions before it
+        fixed at the estimate; sets its part of the estimate."""
+        p = self.params
+        dims = PARTITIONS[partition]
+        parts = PARTITION_PARTS[partition]
+        scored, baseline, base = self._scored_points(points, partition)
+        shown = len(scored) if partition == "torso" else len(points)
+        expected = self.expected_support(shown)[parts]
+        idx = np.array(dims)
+        for layer in range(layers):
+            ll = self._score(scored, baseline, base, partition, expected)
+            beta = annealing_exponent(ll, float(p.survival_rate))
+            w = np.exp(beta * (ll - ll.max()))
+            w /= w.sum()
+            if layer == layers - 1:
+                self.estimate[idx] = _weighted_mean(self.particles[:, idx], w, dims)
+            chosen = systematic_resample(w, self.rng)
+            self.particles[:, idx] = self.particles[chosen][:, idx]
+            if layer < layers - 1:
+                sd = spread[idx] * float(p.anneal_decay) ** (layer + 1)
+                self.particles[:, idx] += self.rng.normal(size=(len(chosen), len(idx))) * sd
+                self.particles = _clamp(self.particles)
+        if partition == "torso" and _YAW in dims:  # keep yaws next to their mean
+            delta = self.particles[:, _YAW] - self.estimate[_YAW]
+            self.particles[:, _YAW] = self.estimate[_YAW] + np.angle(np.exp(1j * delta))
+
+    def _score(self, scored, baseline, base, partition, expected) -> np.ndarray:
+        p = self.params
+        state = self.particles
+        if partition != "torso":  # limbs hang from the fixed torso
+            state = np.broadcast_to(self.estimate, state.shape).copy()
+            dims = list(PARTITIONS[partition])
+            state[:, dims] = self.particles[:, dims]
+        pts, rot = forward_kinematics(state, self.shape, PARTITION_FRAMES[partition], base)
+        geometry = part_geometry(pts, rot, self.shape, PARTITION_PARTS[partition])
+        return log_likelihood(
+            scored,
+            geometry,
+            expected,
+            float(p.sigma),
+            float(p.alpha),
+            float(p.support_weight),
+            baseline,
+        )
+
+    def _scored_points(self, points: np.ndarray, partition: str):
+        """The points a partition is scored on, their baseline, and the fixed pose's FK."""
+        p = self.params
+        if partition == "torso":
+            keep = int(p.torso_points)
+            if len(points) > keep:
+                points = points[self.rng.choice(len(points), keep, replace=False)]
+            return points, None, None
+        base = forward_kinematics(self.estimate, self.shape)
+        done = list(PARTITIONS).index(partition)
+        fixed = np.array(
+            [k for k, part in enumerate(PARTS) if part.partition in list(PARTITIONS)[:done]]
+        )
+        geometry = part_geometry(base[0][None], base[1][None], self.shape, fixed)
+        baseline, _ = associate(points, geometry, float(p.alpha))
+        baseline = baseline[0]
+        parts = PARTITION_PARTS[partition]
+        reach = part_reach(self.shape, parts) + float(p.reach_margin)
+        root = base[0][_ROOT_JOINT[partition]]
+        keep = (np.linalg.norm(points - root, axis=1) < reach) & (
+            baseline > float(p.explained_skip)
+        )
+        return points[keep], baseline[keep], base
+
+    def fit(self, points: np.ndarray, state: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+        """How well a pose (the estimate by default) explains ``points``: the share of points
+        within alpha of a part, and the support of each area of interest, (K, 2), as a
+        share of what it should hold (capped at 1)."""
+        state = self.estimate if state is None else state
+        pts, rot = forward_kinematics(state, self.shape)
+        geometry = part_geometry(pts[None], rot[None], self.shape)
+        _, area = associate(points, geometry, float(self.params.alpha))
+        area = area[0]
+        counts = np.bincount(area[area >= 0], minlength=2 * len(PARTS)).reshape(-1, 2)
+        expected = self.expected_support(len(points))
+        support = np.minimum(1.0, counts / np.maximum(expected, 1e-9))
+        return float(np.mean(area >= 0)) if len(area) else 0.0, support
+
+
+def _clamp(state: np.ndarray) -> np.ndarray:
+    return np.clip(state, LIMITS[:, 0], LIMITS[:, 1])

@@ -1,0 +1,212 @@
+"""Parameters of the skeleton stage (MDCA): the likelihood, the annealed particle filter,
+the motion model, initialisation and loss. docs/skeleton.md explains each."""
+
+from __future__ import annotations
+
+from optrack.params import Param, Schema, register
+
+__all__ = ["SKELETON_PARAMS"]
+
+SKELETON_PARAMS = register(
+    Schema(
+        "skeleton",
+        [
+            # ---- likelihood (eq. 7-9)
+            Param(
+                "sigma",
+                0.15,
+                min=0.01,
+                max=2.0,
+                step=0.01,
+                help="Standard deviation of the Gaussian on a point's scaled distance to its part "
+                "(in part radii).",
+            ),
+            Param(
+                "alpha",
+                0.6,
+                min=0.05,
+                max=5.0,
+                step=0.05,
+                help="Data association threshold: a point farther than this (in part radii) from "
+                "every part is clutter and costs alpha.",
+            ),
+            Param(
+                "support_weight",
+                0.5,
+                min=0.0,
+                max=10.0,
+                step=0.05,
+                help="Cost of an area of interest (a part's half near a joint) left without data, "
+                "against the mean squared distance term.",
+            ),
+            Param(
+                "support_fraction",
+                0.25,
+                min=0.0,
+                max=1.0,
+                step=0.05,
+                help="Share of its surface's share of the cloud an area of interest must hold to "
+                "count as supported.",
+            ),
+            # ---- annealed particle filter
+            Param(
+                "particles",
+                2000,
+                min=50,
+                max=20000,
+                step=50,
+                help="Particles per partition of the annealed particle filter.",
+            ),
+            Param(
+                "layers",
+                3,
+                min=1,
+                max=20,
+                step=1,
+                help="Annealing layers per partition and frame.",
+            ),
+            Param(
+                "survival_rate",
+                0.5,
+                min=0.05,
+                max=0.95,
+                step=0.05,
+                help="Share of effective particles each annealing layer keeps (Deutscher's "
+                "alpha); sets each layer's exponent.",
+            ),
+            Param(
+                "anneal_decay",
+                0.6,
+                min=0.1,
+                max=1.0,
+                step=0.05,
+                help="Each annealing layer diffuses particles by this factor times the previous "
+                "layer's spread.",
+            ),
+            Param(
+                "torso_points",
+                250,
+                min=10,
+                max=100000,
+                step=10,
+                help="The torso (scored on the whole body) is scored on a random sample of this "
+                "many of the person's points.",
+            ),
+            Param(
+                "reach_margin",
+                0.15,
+                min=0.0,
+                max=1.0,
+                step=0.05,
+                unit="m",
+                help="A limb is scored on the points within its length plus this of its root joint.",
+            ),
+            Param(
+                "explained_skip",
+                0.1,
+                min=0.0,
+                max=1.0,
+                step=0.05,
+                help="A limb skips points the parts already fixed explain this well (in part "
+                "radii): it could not explain them better.",
+            ),
+            # ---- motion model: Gaussian random walk per frame, agility per joint group
+            Param(
+                "agility_root_m",
+                1.5,
+                min=0.01,
+                max=10.0,
+                step=0.05,
+                unit="m/s",
+                help="Random walk of the pelvis position: standard deviation per second.",
+            ),
+            Param(
+                "agility_root_rad",
+                3.0,
+                min=0.01,
+                max=20.0,
+                step=0.1,
+                unit="rad/s",
+                help="Random walk of the body's orientation.",
+            ),
+            Param(
+                "agility_torso_rad",
+                3.0,
+                min=0.01,
+                max=20.0,
+                step=0.1,
+                unit="rad/s",
+                help="Random walk of the spine and neck angles.",
+            ),
+            Param(
+                "agility_arms_rad",
+                8.0,
+                min=0.01,
+                max=40.0,
+                step=0.1,
+                unit="rad/s",
+                help="Random walk of the shoulder and elbow angles.",
+            ),
+            Param(
+                "agility_legs_rad",
+                6.0,
+                min=0.01,
+                max=40.0,
+                step=0.1,
+                unit="rad/s",
+                help="Random walk of the hip and knee angles.",
+            ),
+            Param(
+                "max_dt",
+                0.2,
+                min=0.01,
+                max=2.0,
+                step=0.01,
+                unit="s",
+                help="Longest gap between frames the motion model spans; a longer one counts as this.",
+            ),
+            # ---- initialisation and loss (§IV-D)
+            Param(
+                "init_layers",
+                8,
+                min=1,
+                max=40,
+                step=1,
+                help="Annealing layers of each coarse-to-fine initialisation step.",
+            ),
+            Param(
+                "min_points",
+                60,
+                min=1,
+                max=10000,
+                step=1,
+                help="Fewer points than this for a person: no update (the frame counts as a miss).",
+            ),
+            Param(
+                "track_fraction",
+                0.7,
+                min=0.0,
+                max=1.0,
+                step=0.05,
+                help="Share of the cloud the estimate must explain (within alpha) to be tracking.",
+            ),
+            Param(
+                "lost_fraction",
+                0.45,
+                min=0.0,
+                max=1.0,
+                step=0.05,
+                help="Below this share explained (the likelihood collapsed), a frame is a miss.",
+            ),
+            Param(
+                "lost_frames",
+                5,
+                min=1,
+                max=1000,
+                step=1,
+                help="Consecutive misses after which the skeleton is lost and initialises again.",
+            ),
+        ],
+        help="Whole-body skeleton tracking (MDCA): body model, likelihood, annealed particle filter.",
+    )
+)
