@@ -101,9 +101,21 @@ class IndexEntry(msgspec.Struct, forbid_unknown_fields=True, omit_defaults=True)
     confidence: str | None = None
 
 
+# Joint names recordings written before the skeleton's vocabulary used, and theirs now.
+LEGACY_JOINT_NAMES = {
+    f"{joint}_{side[0]}": f"{side}_{joint}"
+    for joint in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")
+    for side in ("left", "right")
+}
+
+
 class PersonTruth(msgspec.Struct, forbid_unknown_fields=True, omit_defaults=True):
     """One person's true state: floor position (world, metres), height, and optionally
-    the fraction of the body visible from each sensor and 3D joint positions."""
+    the fraction of the body visible from each sensor, 3D joint positions (world,
+    metres) and joint angles (rotation vectors, radians: each joint's rotation
+    relative to its parent, the pelvis's relative to the world; zero is standing
+    straight, arms hanging). Joints are named as optrack.skeleton.joints names them;
+    older recordings' names (``wrist_l``) are read as today's (``left_wrist``)."""
 
     id: int
     x: float
@@ -111,6 +123,11 @@ class PersonTruth(msgspec.Struct, forbid_unknown_fields=True, omit_defaults=True
     height: float
     visible: dict[str, float] = {}
     joints: dict[str, tuple[float, float, float]] = {}
+    angles: dict[str, tuple[float, float, float]] = {}
+
+    def __post_init__(self) -> None:
+        if any(name in LEGACY_JOINT_NAMES for name in self.joints):
+            self.joints = {LEGACY_JOINT_NAMES.get(k, k): v for k, v in self.joints.items()}
 
 
 class BoardTruth(msgspec.Struct, forbid_unknown_fields=True, omit_defaults=True):

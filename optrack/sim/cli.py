@@ -25,6 +25,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         sensor_model=args.sensor_model,
         seconds=args.seconds,
         params=params,
+        clips=args.clip,
     )
     bar = ProgressBar(
         f"sim {sim.scenario.name}", sum(sim.frame_count(k) for k in range(len(sim.sensors)))
@@ -82,4 +83,11 @@ def add_commands(commands: Any, command: Any) -> None:
         help="sensor model for every sensor",
     )
     p.add_argument("--config", help="YAML parameter file (sim_* stages, e.g. sim_kinect1)")
+    p.add_argument(
+        "--clip",
+        action="append",
+        metavar="PATH",
+        help="motion each person performs: a BVH file or walk/wave/crouch/turn "
+        "(repeat for one per person; e.g. with the mocap scenario)",
+    )
     add_json(p)

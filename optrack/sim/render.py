@@ -120,6 +120,7 @@ class DynamicGeometry:
     hulls: list[np.ndarray]
     board: PhysicalBoard | None = None
     world_T_board: np.ndarray | None = None
+    triangle_part: np.ndarray | None = None  # body part of each triangle (-1: none)
     _scene: o3d.t.geometry.RaycastingScene | None = None
 
     @property
@@ -143,7 +144,8 @@ class RenderResult:
 
     ``depth`` is z in the camera frame (metres, inf where no surface);
     ``ray_scale`` turns depth into range along the ray; ``labels`` is the owner
-    index of a moving object per pixel (-1 for the venue or nothing);
+    index of a moving object per pixel (-1 for the venue or nothing), ``parts`` the
+    body part there (an index into :data:`optrack.sim.body.PART_NAMES`; -1 elsewhere);
     ``radiance`` is linear RGB (1 = white, fully lit); ``second_view_blocked``
     marks points the model's second viewpoint cannot see. ``static`` is the
     venue-only render of the same sensor (never changes) and ``changed`` the
@@ -159,6 +161,7 @@ class RenderResult:
     infrared_albedo: np.ndarray | None = None
     second_view_blocked: np.ndarray | None = None
     static: RenderResult | None = None
+    parts: np.ndarray | None = None
     changed: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     @property
@@ -333,6 +336,7 @@ class SensorRenderer:
         depth = venue.depth.ravel().copy()
         cos = venue.cos_incidence.ravel().copy()
         labels = venue.labels.ravel().copy()
+        parts = np.full(labels.shape, _NO_OWNER, dtype=np.int16)
         radiance = None if venue.radiance is None else venue.radiance.reshape(-1, 3).copy()
         infrared = None if venue.infrared_albedo is None else venue.infrared_albedo.ravel().copy()
         blocked = (
@@ -340,7 +344,7 @@ class SensorRenderer:
         )
         changed = np.zeros(0, dtype=np.int64)
         if dynamic is not None and not dynamic.empty:
-            changed = self._cast(dynamic, depth, cos, labels, radiance, infrared)
+            changed = self._cast(dynamic, depth, cos, labels, radiance, infrared, parts)
             if blocked is not None:
                 self._second_view(dynamic, depth, changed, blocked)
         shape = self.shape
@@ -349,6 +353,7 @@ class SensorRenderer:
             cos_incidence=cos.reshape(shape),
             ray_scale=self.ray_scale,
             labels=labels.reshape(shape),
+            parts=parts.reshape(shape),
             radiance=None if radiance is None else radiance.reshape(*shape, 3),
             infrared_albedo=None if infrared is None else infrared.reshape(shape),
             second_view_blocked=None if blocked is None else blocked.reshape(shape),
@@ -364,6 +369,7 @@ class SensorRenderer:
         labels: np.ndarray,
         radiance: np.ndarray | None,
         infrared: np.ndarray | None,
+        parts: np.ndarray | None = None,
     ) -> np.ndarray:
         """Cast the rays that can meet moving things; update the flat images where they
         hit something nearer than the venue. Returns the flat indices updated."""
@@ -384,6 +390,8 @@ class SensorRenderer:
         depth[index] = tt
         cos[index] = self._cos(normals, directions, index)
         labels[index] = dynamic.triangle_owner[prim]
+        if parts is not None and dynamic.triangle_part is not None:
+            parts[index] = dynamic.triangle_part[prim]
         if radiance is None and infrared is None:
             return index
         table = dynamic.materials

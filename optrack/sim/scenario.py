@@ -185,7 +185,11 @@ class SensorsSpec(_Spec):
 
 class PeopleSpec(_Spec):
     """Who walks in the venue. Routes go to the first people; then standing people,
-    groups, crossing pairs and people who enter and leave; the rest wander."""
+    groups, crossing pairs and people who enter and leave; the rest wander. With
+    ``clips`` (BVH files, relative to the scenario file, or procedural motions: walk,
+    wave, crouch, turn), everyone performs them instead, person k clip k modulo their
+    number. ``shapes: varied`` gives each person a shape of their own (limb lengths,
+    girths, tapering limbs); ``standard`` is Winter's proportions for all."""
 
     count: int | tuple[int, int] = 4
     children: float = 0.0
@@ -195,6 +199,8 @@ class PeopleSpec(_Spec):
     crossing: int = 0
     enter_leave: int = 0
     routes: list[list[Vec2]] = []
+    clips: list[str] = []
+    shapes: Literal["standard", "varied"] = "standard"
 
 
 class BoardSpec(_Spec):

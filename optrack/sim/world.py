@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import open3d as o3d
@@ -21,16 +22,10 @@ from optrack.recording.format import BoardTruth, GroundTruth, PersonTruth, Senso
 from optrack.sim.board import BOARD_PARAMS, PhysicalBoard
 from optrack.sim.board_operator import Operator
 from optrack.sim.board_plan import SensorView, plan_board_steps
-from optrack.sim.body import (
-    BODY_PARAMS,
-    HEAD_RADII,
-    JOINTS,
-    MATERIALS_PER_PERSON,
-    TRUTH_JOINTS,
-    BodyModel,
-)
+from optrack.sim.body import BODY_PARAMS, MATERIALS_PER_PERSON, BodyModel, BodyShape, BodyState
 from optrack.sim.crowd import CROWD_PARAMS, Crowd, CrowdState
 from optrack.sim.materials import MaterialTable
+from optrack.sim.mocap import add_performers, pose_people
 from optrack.sim.models import MODELS, SensorModel
 from optrack.sim.render import RENDER_PARAMS, DynamicGeometry, SensorRenderer, StaticScene
 from optrack.sim.scenario import Scenario, ScenarioError, load_scenario
@@ -132,6 +127,8 @@ class WorldState:
     board_pose: np.ndarray | None
     board_on_floor: bool
     geometry: DynamicGeometry
+    body: BodyState | None = None  # the joint-angle state and every joint's global rotation
+    shapes: list[BodyShape] = dataclasses.field(default_factory=list)  # each present person's
 
 
 def _camera_pose(position: np.ndarray, forward: np.ndarray, roll: float = 0.0) -> np.ndarray:
@@ -168,6 +165,7 @@ class Simulation:
         sensor_model: str | None = None,
         seconds: float | None = None,
         params: dict[str, Params] | None = None,
+        clips: list[str] | None = None,
     ) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         self.seed = int(seed)
@@ -181,7 +179,11 @@ class Simulation:
         self.venue = Venue(self.scenario.venue)
         self.static = StaticScene(self.venue)
         self.sensors = self._place_sensors(sensors, sensor_model, sensor_rng, params)
-        self.body = BodyModel(params.get("sim_body") or BODY_PARAMS.create())
+        self.body = BodyModel(
+            params.get("sim_body") or BODY_PARAMS.create(),
+            shape_seed=streams[3],
+            varied=self.scenario.people.shapes == "varied",
+        )
         self.crowd = Crowd(
             self.venue,
             crowd_rng,
@@ -195,7 +197,10 @@ class Simulation:
         self.operator: Operator | None = None
         if self.scenario.board is not None:
             self._add_operator(params.get("sim_board") or BOARD_PARAMS.create(), seconds)
-        self.crowd.populate(self.scenario.people, count, self.seconds)
+        clips = list(clips or self.scenario.people.clips)
+        base = str(Path(self.scenario.source).parent) if self.scenario.source else None
+        performers = add_performers(self.crowd, self.body, clips, count, self.seconds, base)
+        self.crowd.populate(self.scenario.people, count - len(performers), self.seconds)
         self._renderers: dict[tuple, SensorRenderer] = {}
         self._noise: dict[int, np.random.Generator] = {}
         self._jitter: dict[int, np.random.Generator] = {}
@@ -310,8 +315,8 @@ class Simulation:
             )
         self.crowd.advance(t)
         state = self.crowd.state(t)
-        joints = self.body.joints(state.pose)
-        vertices = self.body.vertices(joints, state.pose)
+        body, shapes = pose_people(self.body, self.crowd, state)
+        vertices = self.body.vertices(body, shapes)
         board_pose = None
         on_floor = False
         if self.operator is not None:
@@ -320,7 +325,9 @@ class Simulation:
             if not on_floor:  # carried along with the operator since the last step
                 board_pose[:2, 3] += self.crowd.vel[self.operator_index] * (t - self.crowd.t)
         geometry = self._geometry(state, vertices, board_pose)
-        return WorldState(t, state, joints, vertices, board_pose, on_floor, geometry)
+        return WorldState(
+            t, state, body.joints, vertices, board_pose, on_floor, geometry, body, shapes
+        )
 
     def _geometry(
         self, state: CrowdState, vertices: np.ndarray, board_pose: np.ndarray | None
@@ -334,6 +341,7 @@ class Simulation:
             tris = [body.template_triangles + k * per_v for k in range(count)]
             material = [body.template_material + k * MATERIALS_PER_PERSON for k in range(count)]
             owner = [np.full(len(body.template_triangles), k, dtype=np.int32) for k in range(count)]
+            part = [body.template_part] * count
             texture = [body.template_texture] * count
             materials = [m for i in state.index for m in self.crowd.people[i].materials]
             if with_board:
@@ -341,6 +349,7 @@ class Simulation:
                 tris.append(board.triangles + count * per_v)
                 material.append(np.where(board.triangle_front, len(materials), len(materials) + 1))
                 owner.append(np.full(len(board.triangles), count, dtype=np.int32))
+                part.append(np.full(len(board.triangles), -1, dtype=np.int16))
                 texture.append(np.zeros(len(board.triangles), dtype=np.float32))
                 materials += board.materials
             self._layout = (
@@ -349,9 +358,10 @@ class Simulation:
                 np.concatenate(owner) if owner else np.zeros(0, np.int32),
                 np.concatenate(texture).astype(np.float32) if texture else np.zeros(0, np.float32),
                 MaterialTable(materials),
+                np.concatenate(part).astype(np.int16) if part else np.zeros(0, np.int16),
             )
             self._layout_key = key
-        triangles, material, owner, texture, table = self._layout
+        triangles, material, owner, texture, table, part = self._layout
         flat = vertices.reshape(-1, 3)
         boxes = list(np.stack([vertices.min(axis=1), vertices.max(axis=1)], axis=1))
         hulls = body.hulls(vertices) if count else []
@@ -366,6 +376,7 @@ class Simulation:
             triangles=triangles,
             triangle_material=material,
             triangle_owner=owner,
+            triangle_part=part,
             triangle_texture=texture,
             materials=table,
             boxes=np.array(boxes).reshape(-1, 2, 3),
@@ -495,27 +506,22 @@ class Simulation:
         decimals = int(self.params.truth_decimals)
         fractions = self.visible_fractions(state) if visibility else None
         people = []
-        head = JOINTS.index("head")
-        pelvis = JOINTS.index("pelvis")
-        heights = state.crowd.pose.height
+        tops = state.body.head_tops(state.shapes) if state.body is not None else []
         for k, person_id in enumerate(state.crowd.ids):
-            joints = state.joints[k]
-            top = joints[head, 2] + HEAD_RADII[2] * heights[k]
+            joints, angles = state.body.truth(k, decimals)
             people.append(
                 PersonTruth(
                     id=int(person_id),
-                    x=round(float(joints[pelvis, 0]), decimals),
-                    y=round(float(joints[pelvis, 1]), decimals),
-                    height=round(float(top), decimals),
+                    x=joints["pelvis"][0],
+                    y=joints["pelvis"][1],
+                    height=round(float(tops[k]), decimals),
                     visible=(
                         {s.id: round(float(fractions[k, j]), 3) for j, s in enumerate(self.sensors)}
                         if fractions is not None
                         else {}
                     ),
-                    joints={
-                        name: tuple(round(float(c), decimals) for c in joints[JOINTS.index(name)])
-                        for name in TRUTH_JOINTS
-                    },
+                    joints=joints,
+                    angles=angles,
                 )
             )
         boards = []

@@ -74,8 +74,8 @@ def test_walking_people_swing_legs_and_arms_in_opposition(tmp_path):
         heading = state.crowd.pose.heading[0]
         forward = np.array([math.cos(heading), math.sin(heading), 0.0])
         pelvis = joints[JOINTS.index("pelvis")]
-        legs.append((joints[JOINTS.index("ankle_l")] - pelvis) @ forward)
-        arms.append((joints[JOINTS.index("wrist_l")] - pelvis) @ forward)
+        legs.append((joints[JOINTS.index("left_ankle")] - pelvis) @ forward)
+        arms.append((joints[JOINTS.index("left_wrist")] - pelvis) @ forward)
     legs, arms = np.array(legs), np.array(arms)
     assert np.ptp(legs) > 0.3  # a stride, not a shuffle
     assert np.ptp(arms) > 0.1
@@ -138,7 +138,7 @@ def test_truth_has_every_joint_of_every_person():
     for person in truth.people:
         assert set(person.joints) == set(TRUTH_JOINTS)
         head = np.array(person.joints["head"])
-        ankle = np.array(person.joints["ankle_l"])
+        ankle = np.array(person.joints["left_ankle"])
         assert head[2] - ankle[2] > 1.0
         assert set(person.visible) == {s.id for s in sim.sensors}
 

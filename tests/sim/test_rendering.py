@@ -123,7 +123,7 @@ def test_joints_of_the_body_are_inside_its_rendered_silhouette(tmp_path):
     camera = transform_points(invert(sensor.world_T_camera), state.joints[0])
     uv, _ = project(camera, sensor.model.intrinsics)
     inside = 0
-    for name in ("head", "spine", "pelvis", "knee_l", "knee_r"):
+    for name in ("head", "spine", "pelvis", "left_knee", "right_knee"):
         u, v = np.rint(uv[JOINTS.index(name)]).astype(int)
         inside += render.labels[v - 2 : v + 3, u - 2 : u + 3].max() == 0
     assert inside == 5
