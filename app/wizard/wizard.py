@@ -1,11 +1,12 @@
 """The calibration wizard: OpenPTrack's launch files and rostopic commands as six pages.
 
 The wizard is one more client of the site's bus. It drives the calibration
-code through :class:`optrack.calibration.live.LiveCalibration` and shows
-what it says: a QTimer polls ``state()`` (``calibration_wizard.poll_hz``)
+code through :class:`optrack.runtime.calibration_live.LiveCalibration` and
+shows what it says: a QTimer polls ``state()`` (``calibration_wizard.poll_hz``)
 and hands the snapshot to the page on screen; every other backend call runs
 on the wizard's worker thread (:class:`~app.wizard.jobs.JobRunner`), so the
-window never freezes.
+window never freezes. The wizard keeps no calibration of its own: what was
+solved and refined is the backend's, as its latest state says.
 
 Pages: network and checkerboard, intrinsics (optional), extrinsics ("move
 the checkerboard"), ground ("lay the board on the floor", then solve),
@@ -22,17 +23,13 @@ from PySide6.QtGui import QImage, QPainter
 from PySide6.QtWidgets import QWidget, QWizard
 
 from app.view_params import VIEW_PARAMS
+from app.wizard.capture_pages import ExtrinsicsPage, FloorPage
 from app.wizard.jobs import JobRunner
-from app.wizard.pages import (
-    ExtrinsicsPage,
-    FloorPage,
-    IntrinsicsPage,
-    NetworkPage,
-    RefinementPage,
-    ReviewPage,
-    WizardPage,
-)
+from app.wizard.page import WizardPage
+from app.wizard.result_pages import RefinementPage, ReviewPage
+from app.wizard.setup_pages import IntrinsicsPage, NetworkPage
 from optrack.calibration.board import Checkerboard
+from optrack.calibration.live import LiveState, RefinementReport
 from optrack.errors import UserError
 from optrack.params import Param, Schema, register
 from optrack.types import NetworkCalibration
@@ -149,15 +146,11 @@ class CalibrationWizard(QWizard):
         self.params = WIZARD_PARAMS.create()
         self.view_params = VIEW_PARAMS.create()
         self.only_sensors = list(sensors) if sensors is not None else None
-        self.live: Any = None  # optrack.calibration.live.LiveCalibration once connected
+        self.live: Any = None  # optrack.runtime.calibration_live.LiveCalibration once connected
         self.board = default_board()
         self.sensors: list[str] = []
         self.simulated = False
-        self.solved: NetworkCalibration | None = None
-        self.calibration: NetworkCalibration | None = None
-        self.refined = False
-        self.refinement: Any = None
-        self.last_state: Any = None
+        self.last_state: LiveState | None = None  # the backend's latest snapshot
         self.runner = JobRunner(self)
         self.network_page = NetworkPage()
         self.intrinsics_page = IntrinsicsPage()
@@ -200,7 +193,7 @@ class CalibrationWizard(QWizard):
         self._replace_live(self.board, then=None)
 
     def _replace_live(self, board: Checkerboard, then: Any) -> None:
-        from optrack.calibration.live import LiveCalibration
+        from optrack.runtime.calibration_live import LiveCalibration
 
         old, bus = self.live, self.bus
         sensors = self.only_sensors if old is None else old.sensors
@@ -216,6 +209,7 @@ class CalibrationWizard(QWizard):
                 self.runner.submit("Closing the calibration", lambda progress: live.close())
                 return
             self.live = live
+            self.last_state = None
             self.board = board
             self.sensors = list(live.sensors)
             self.simulated = bool(live.simulated)
@@ -239,16 +233,25 @@ class CalibrationWizard(QWizard):
         self._replace_live(board, then=self.next)
         return False
 
-    def set_calibration(self, calibration: NetworkCalibration, refined: bool) -> None:
-        """The calibration the review page saves: solved, then refined when refinement ran."""
-        if refined:
-            self.refined = True
-            self.refinement = self.refinement_page.report
-        else:
-            self.solved = calibration
-            self.refined = False
-            self.refinement = None
-        self.calibration = calibration
+    # ------------------------------------------------- the backend's results
+    @property
+    def solved(self) -> NetworkCalibration | None:
+        """The backend's solved calibration (None before a solve)."""
+        return self.last_state.solved if self.last_state is not None else None
+
+    @property
+    def refinement(self) -> RefinementReport | None:
+        """The backend's refinement of the solved calibration (None when none ran)."""
+        return self.last_state.refinement if self.last_state is not None else None
+
+    @property
+    def refined(self) -> bool:
+        return self.refinement is not None
+
+    @property
+    def calibration(self) -> NetworkCalibration | None:
+        """The calibration the review page saves: the refined one, else the solved one."""
+        return self.last_state.calibration if self.last_state is not None else None
 
     def view_thresholds(self, phase: str) -> tuple[int, int]:
         """(fair, good) view counts for a phase's red / yellow / green (backend schema)."""
@@ -256,17 +259,23 @@ class CalibrationWizard(QWizard):
 
     # ------------------------------------------------------------ feedback
     def poll(self) -> None:
-        """Hand the live calibration's snapshot to the page on screen."""
+        """Take the live calibration's snapshot now (the timer does, ~5 times a second)."""
         if self.live is None:
             return
-        page = self.currentPage()
         try:
             state = self.live.state()
         except UserError as error:
+            page = self.currentPage()
             if isinstance(page, WizardPage):
                 page.show_error(str(error))
             return
+        self.show(state)
+
+    def show(self, state: LiveState) -> None:
+        """The backend's snapshot: the wizard's view of the calibration, and the page on
+        screen draws it."""
         self.last_state = state
+        page = self.currentPage()
         if isinstance(page, WizardPage):
             page.show_state(state)
 

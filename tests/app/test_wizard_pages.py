@@ -189,8 +189,11 @@ def test_refinement_page_plots_trajectories_before_and_after_and_the_error_figur
         refused={"cam3": 3.14},
         board_rms_px={"cam3": 0.12},
     )
-    page.report = report
-    page._refined(report)
+    # The backend's snapshot after refine(): the wizard takes it, the page draws it.
+    refined = state("idle", [], refinement=report, calibration=report.calibration)
+    wizard.show(refined)
+    page.show_state(refined)
+    assert page.report is report
     assert set(page.before.curves) == set(page.after.curves) == {"cam0", "cam1"}
     assert "11.2 cm on average before refinement and 2.0 cm after" in page.figure.text()
     assert "cam2" in page.figure.text()
@@ -221,7 +224,7 @@ def test_review_page_shows_each_sensors_quality_from_the_calibration_file(wizard
             "floor_views": 6,
             "refinement_error_before_m": 0.05,
             "refinement_error_after_m": 0.02,
-            "refinement_refused": "cam0",
+            "refinement_refused": ["cam0"],
         },
     )
     page = wizard.review_page
