@@ -27,6 +27,7 @@ The live calibration sees the operator only through its small interface
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -218,6 +219,19 @@ def _route(half: np.ndarray, margin: float) -> list[tuple[float, float]]:
     return [(round(a, 3), round(b, 3)) for a, b in points]
 
 
+@dataclasses.dataclass
+class _Order:
+    """One operator command: its action and scene, the board, the floor places, whether
+    only pairs of sensors matter (move_board), the sensor shown the board (show_board)."""
+
+    action: str
+    scene: str = ""
+    board: Checkerboard | None = None
+    places: int = 0
+    pairs: bool = False
+    shown: int = -1
+
+
 class SimulatedOperator:
     """The ``operator`` command of a simulated site (see the module docstring).
 
@@ -353,30 +367,28 @@ class SimulatedOperator:
             )
         if action == "status":
             return {"action": self.action, "scene": self.scene, "actions": list(OPERATOR_ACTIONS)}
-        board = None
-        shown = -1
+        order = _Order(action, pairs=bool(args.get("pairs", False)))
         if action == "show_board":
             names = {name: index for name, index in self.sensors}
-            shown = names.get(str(args.get("sensor", "")), -1)
-            if shown < 0:
+            order.shown = names.get(str(args.get("sensor", "")), -1)
+            if order.shown < 0:
                 raise OperatorError(
                     f"the simulated operator shows the board to one of the site's sensors "
                     f"({', '.join(names)}); got {args.get('sensor')!r}."
                 )
         if action in ("move_board", "show_board", "lay_board"):
-            board = self._board(args)
-        places = int(args.get("places", self.params.floor_places))
-        if action == "lay_board" and not 1 <= places <= 10:
-            raise OperatorError(f"the operator lays the board at 1 to 10 places; got {places}.")
-        pairs = bool(args.get("pairs", False))
+            order.board = self._board(args)
+        order.places = int(args.get("places", self.params.floor_places))
+        if action == "lay_board" and not 1 <= order.places <= 10:
+            raise OperatorError(
+                f"the operator lays the board at 1 to 10 places; got {order.places}."
+            )
         with self._lock:
             self.count += 1
-            scene = "" if action == "people" else f"operator-{self.count}-{action}"
-            self.action, self.scene, self.error = action, scene, ""
-        threading.Thread(
-            target=self._prepare, args=(action, scene, board, places, pairs, shown), daemon=True
-        ).start()
-        return {"action": action, "scene": scene}
+            order.scene = "" if action == "people" else f"operator-{self.count}-{action}"
+            self.action, self.scene, self.error = action, order.scene, ""
+        threading.Thread(target=self._prepare, args=(order,), daemon=True).start()
+        return {"action": action, "scene": order.scene}
 
     def _board(self, args: Mapping[str, Any]) -> Checkerboard:
         """The board to carry: the command's, what it leaves out the site scenario's."""
@@ -400,35 +412,25 @@ class SimulatedOperator:
         board.require_asymmetric()
         return board
 
-    def _prepare(
-        self,
-        action: str,
-        scene: str,
-        board: Checkerboard | None,
-        places: int,
-        pairs: bool,
-        shown: int = -1,
-    ) -> None:
+    def _prepare(self, order: _Order) -> None:
         try:
-            uris = (
-                [""] * len(self.sensors)
-                if action == "people"
-                else self._scene_uris(action, scene, board, places, pairs, shown)
-            )
+            uris = [""] * len(self.sensors) if order.action == "people" else self._scene_uris(order)
             with self._lock:
-                if self.scene != scene:  # a newer command came meanwhile
+                if self.scene != order.scene:  # a newer command came meanwhile
                     return
             self._switch(uris)
         except Exception as error:
             sentence = (
                 str(error) if isinstance(error, UserError) else f"{type(error).__name__}: {error}"
             )
-            self.log.error("the simulated operator could not prepare '%s': %s", action, sentence)
+            self.log.error(
+                "the simulated operator could not prepare '%s': %s", order.action, sentence
+            )
             with self._lock:
-                if self.scene == scene:
+                if self.scene == order.scene:
                     self.error = sentence
             return
-        self.log.info("simulated operator: %s", action)
+        self.log.info("simulated operator: %s", order.action)
 
     def _switch(self, uris: list[str]) -> None:
         """Each detector node reads its sensor of the scene from its next frame ("": its
@@ -444,19 +446,13 @@ class SimulatedOperator:
         if problems:
             raise OperatorError(problems[0])
 
-    def _scene_uris(
-        self,
-        action: str,
-        scene: str,
-        board: Checkerboard | None,
-        places: int,
-        pairs: bool,
-        shown: int = -1,
-    ) -> list[str]:
+    def _scene_uris(self, order: _Order) -> list[str]:
+        """Write the order's scene (the site's scenario with the operator in it) and the
+        sim:// URI of each detector node's sensor of it."""
         from optrack.sim.scenario import BoardSpec, PeopleSpec
         from optrack.sim.venue import Venue
 
-        p = self.params
+        p, action, board = self.params, order.action, order.board
         if action == "walk":
             half = Venue(self.base.venue).half
             people = PeopleSpec(count=1, routes=[_route(half, float(p.walk_margin))])
@@ -468,8 +464,8 @@ class SimulatedOperator:
                 cols=board.cols,
                 rows=board.rows,
                 square=board.square,
-                floor_placements=places if action == "lay_board" else 0,
-                intrinsics_sensor=shown,
+                floor_placements=order.places if action == "lay_board" else 0,
+                intrinsics_sensor=order.shown,
                 intrinsics_placements=int(p.intrinsics_places),
             )
         derived = msgspec.structs.replace(
@@ -481,12 +477,12 @@ class SimulatedOperator:
         )
         data = msgspec.to_builtins(derived)
         data.pop("name", None)
-        path = self.run_dir / f"{scene}.yaml"
+        path = self.run_dir / f"{order.scene}.yaml"
         path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
         skip = 0.0
         if action == "lay_board":
             skip = self._skip_to(path, lambda step: step.kind == "floor")
-        elif action == "move_board" and pairs:
+        elif action == "move_board" and order.pairs:
             skip = self._skip_to(path, lambda step: len(step.sensors) > 1)
         start = time.time() + float(p.lead_s) - skip
         extra = "".join(f"&{k}={urllib.parse.quote(v)}" for k, v in sorted(self.options.items()))
