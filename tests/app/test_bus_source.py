@@ -18,6 +18,19 @@ def hub():
     bus.close()
 
 
+def door_status(**fields) -> StatusMessage:
+    """The status of a detector node named after its sensor 'door'."""
+    return StatusMessage(
+        node="detector-door",
+        role="detector",
+        state="running",
+        stamp=1.0,
+        sensor="door",
+        params={"detection": {"voxel_size": 0.06}},
+        **fields,
+    )
+
+
 def joined(qtbot, params) -> BusSource:
     source = BusSource("guitest", params)
     with qtbot.waitSignal(source.connection, timeout=10000) as connected:
@@ -40,15 +53,7 @@ def test_tracks_and_status_from_the_bus_become_signals(qtbot, hub):
                 timeout=5000,
             )
         assert got.args == [batch]
-        status = StatusMessage(
-            node="detector-door",
-            role="detector",
-            state="running",
-            stamp=1.0,
-            sensor="door",
-            fps=29.5,
-            params={"detection": {"voxel_size": 0.06}},
-        )
+        status = door_status(fps=29.5)
         with qtbot.waitSignals([source.schemas, source.status], timeout=5000) as got:
             bus.publish(bus.keys.status("detector-door"), status)
         assert source.nodes_running("detection") == ["detector-door"]
@@ -62,14 +67,7 @@ def test_a_parameter_change_reaches_the_node_that_runs_the_stage(qtbot, hub):
     bus.subscribe(bus.keys.params("detector-door"), ParamsMessage, lambda m, _: received.append(m))
     source = joined(qtbot, params)
     try:
-        status = StatusMessage(
-            node="detector-door",
-            role="detector",
-            state="running",
-            stamp=1.0,
-            sensor="door",
-            params={"detection": {"voxel_size": 0.06}},
-        )
+        status = door_status()
         qtbot.waitUntil(
             lambda: (
                 bus.publish(bus.keys.status("detector-door"), status)
