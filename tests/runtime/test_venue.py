@@ -9,8 +9,8 @@ import time
 from optrack.net.bus import Bus
 from optrack.net.config import BUS_PARAMS
 from optrack.net.messages import StatusMessage
-from optrack.runtime.process import setup_logging
 from optrack.runtime.config import load_node_config
+from optrack.runtime.process import setup_logging
 from optrack.runtime.site import Site
 
 from .conftest import free_port
