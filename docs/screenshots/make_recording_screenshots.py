@@ -43,7 +43,7 @@ def main() -> int:
     configure_qt()
     app = QApplication.instance() or QApplication([sys.argv[0]])
     from app.main_window import MainWindow
-    from optrack.runtime.site import venue_recording
+    from optrack.runtime.venue import venue_recording
 
     scratch = Path(tempfile.mkdtemp(prefix="optrack-shots-"))
     config = scratch / "site.yaml"
