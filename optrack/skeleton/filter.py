@@ -41,9 +41,9 @@ __all__ = [
     "systematic_resample",
 ]
 
-# The parts each partition is scored on: the torso on the whole body (its limbs at each
-# particle's predicted angles), so that the trunk cannot slide onto the legs' points;
-# each limb on its own parts, the rest fixed.
+# The parts each partition is scored on: the torso on the whole body (its limbs at their
+# last estimate), so that the trunk cannot slide onto the legs' points; each limb on its
+# own parts, the rest fixed.
 PARTITION_PARTS: dict[str, np.ndarray] = {
     name: np.array([k for k, part in enumerate(PARTS) if name == "torso" or part.partition == name])
     for name in PARTITIONS
@@ -145,18 +145,26 @@ class SkeletonFilter:
             self.anneal(points, name, int(self.params.layers), spread)
         return self.estimate.copy()
 
-    def anneal(self, points: np.ndarray, partition: str, layers: int, spread: np.ndarray) -> None:
+    def anneal(
+        self,
+        points: np.ndarray,
+        partition: str,
+        layers: int,
+        spread: np.ndarray,
+        parts: np.ndarray | None = None,
+    ) -> None:
         """Anneal one partition's numbers against ``points`` (N, 3), the partitions before it
-        fixed at the estimate; sets its part of the estimate."""
+        fixed at the estimate; sets its part of the estimate. ``parts`` overrides the parts
+        it is scored on (initialisation scores the torso without the arms, yet unknown)."""
         p = self.params
         dims = PARTITIONS[partition]
-        parts = PARTITION_PARTS[partition]
+        parts = PARTITION_PARTS[partition] if parts is None else np.asarray(parts)
         scored, baseline, base = self._scored_points(points, partition)
         shown = len(scored) if partition == "torso" else len(points)
         expected = self.expected_support(shown)[parts]
         idx = np.array(dims)
         for layer in range(layers):
-            ll = self._score(scored, baseline, base, partition, expected)
+            ll = self._score(scored, baseline, base, partition, parts, expected)
             beta = annealing_exponent(ll, float(p.survival_rate))
             w = np.exp(beta * (ll - ll.max()))
             w /= w.sum()
@@ -172,15 +180,15 @@ class SkeletonFilter:
             delta = self.particles[:, _YAW] - self.estimate[_YAW]
             self.particles[:, _YAW] = self.estimate[_YAW] + np.angle(np.exp(1j * delta))
 
-    def _score(self, scored, baseline, base, partition, expected) -> np.ndarray:
+    def _score(self, scored, baseline, base, partition, parts, expected) -> np.ndarray:
         p = self.params
-        state = self.particles
-        if partition != "torso":  # limbs hang from the fixed torso
-            state = np.broadcast_to(self.estimate, state.shape).copy()
-            dims = list(PARTITIONS[partition])
-            state[:, dims] = self.particles[:, dims]
+        # Partitioned sampling: this partition's numbers from the particles, the others at
+        # the estimate (the torso is scored with the limbs where they were last found).
+        state = np.broadcast_to(self.estimate, self.particles.shape).copy()
+        dims = list(PARTITIONS[partition])
+        state[:, dims] = self.particles[:, dims]
         pts, rot = forward_kinematics(state, self.shape, PARTITION_FRAMES[partition], base)
-        geometry = part_geometry(pts, rot, self.shape, PARTITION_PARTS[partition])
+        geometry = part_geometry(pts, rot, self.shape, parts)
         return log_likelihood(
             scored,
             geometry,

@@ -509,32 +509,54 @@ def part_areas(shape: BodyShape) -> np.ndarray:
     """Each part's lateral surface, m^2 (mean perimeter of its ellipse times its extent)."""
     length = bone_lengths(shape)
     radii = np.asarray(shape.radii).mean(axis=1)
-    side = radii / _PART_ASPECT
+    side = radii * _PART_ASPECT
     perimeter = np.pi * (radii + side)
     return perimeter * length * (_PART_T[:, 1] - _PART_T[:, 0])
+
+
+def _cap_areas(shape: BodyShape) -> np.ndarray:
+    """Each part's two end caps (half ellipsoids of radii r, r * aspect, r), m^2, (K, 2):
+    Thomsen's approximation of an ellipsoid's surface, halved."""
+    r = np.asarray(shape.radii)
+    side = r * _PART_ASPECT[:, None]
+    q = 1.6
+    return 2.0 * np.pi * ((2.0 * (r * side) ** q + r ** (2 * q)) / 3.0) ** (1.0 / q)
 
 
 def surface_points(
     state: np.ndarray, shape: BodyShape, count: int, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Points spread evenly over the model's surface at one state, and their outward
-    normals, each (count, 3): the cloud a perfect sensor would see all around."""
+    """Points spread evenly over the model's surface (sides and end caps) at one state,
+    and their outward normals, each (count, 3): what a perfect sensor all around sees."""
     points, rotations = forward_kinematics(np.asarray(state, dtype=np.float64), shape)
     geometry = part_geometry(points[None], rotations[None], shape)[0].astype(np.float64)
-    areas = part_areas(shape)
-    which = rng.choice(len(PARTS), size=count, p=areas / areas.sum())
-    g = geometry[which]
-    s = g[:, 12] + rng.uniform(size=count) * (g[:, 13] - g[:, 12])
-    r = g[:, 14] + g[:, 15] * np.clip(s * g[:, 16], 0.0, 1.0)
-    angle = rng.uniform(0.0, 2.0 * np.pi, count)
+    # Pieces: each part's side, its start cap, its end cap.
+    areas = np.concatenate([part_areas(shape)[:, None], _cap_areas(shape)], axis=1).ravel()
+    piece = rng.choice(areas.size, size=count, p=areas / areas.sum())
+    g, kind = geometry[piece // 3], piece % 3
     e, f = g[:, 6:9], g[:, 9:12]
     f_unit = f / np.linalg.norm(f, axis=1, keepdims=True)
-    side = r / np.linalg.norm(f, axis=1)  # the side radius: r * aspect
-    radial = (
-        np.cos(angle)[:, None] * r[:, None] * e + np.sin(angle)[:, None] * side[:, None] * f_unit
+    angle = rng.uniform(0.0, 2.0 * np.pi, count)
+    # Along the bone: uniform on the side; at the cap's base for a cap, then pushed out.
+    s = np.where(kind == 0, g[:, 12] + rng.uniform(size=count) * (g[:, 13] - g[:, 12]), 0.0)
+    s = np.where(kind == 1, g[:, 12], np.where(kind == 2, g[:, 13], s))
+    cos_polar = np.where(kind == 0, 0.0, rng.uniform(size=count))  # uniform on a sphere
+    sin_polar = np.sqrt(1.0 - cos_polar**2)
+    outward = np.where(kind == 1, -1.0, 1.0) * cos_polar
+    r = g[:, 14] + g[:, 15] * np.clip(s * g[:, 16], 0.0, 1.0)
+    side = r / np.linalg.norm(f, axis=1)  # the side radius, r * aspect
+    across_e, across_f = np.cos(angle) * sin_polar, np.sin(angle) * sin_polar
+    surface = (
+        g[:, 0:3]
+        + (s + r * outward)[:, None] * g[:, 3:6]
+        + (r * across_e)[:, None] * e
+        + (side * across_f)[:, None] * f_unit
     )
-    surface = g[:, 0:3] + s[:, None] * g[:, 3:6] + radial
-    # The ellipse's outward normal: gradient of (x/r)^2 + (y/side)^2.
-    normal = (np.cos(angle) / r)[:, None] * e + (np.sin(angle) / side)[:, None] * f_unit
+    # The outward normal: the gradient of (x/r)^2 + (y/side)^2 + (z/r)^2.
+    normal = (
+        (across_e / r)[:, None] * e
+        + (across_f / side)[:, None] * f_unit
+        + (outward / r)[:, None] * g[:, 3:6]
+    )
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     return surface, normal

@@ -1,0 +1,118 @@
+"""Initialisation (MDCA §IV-D): coarse to fine, from the torso to the arms, then the legs.
+
+A person may enter in any standing pose. The torso is found first: its
+position from the cloud's middle, its heading from the cloud's widest
+horizontal direction at chest height (the shoulders' line), tried both ways
+(facing either side of that line); it is annealed over ``init_layers`` layers
+from a broad spread. Then each arm, from angles drawn uniformly within its
+joint limits, is annealed the same way against the fixed torso; then each
+leg. A second, finer round repeats the partitions from that estimate; of the
+two headings, the one whose full-body likelihood is higher is kept (the feet
+and the knees, which bend one way only, tell front from back).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from optrack.skeleton.filter import SkeletonFilter, motion_spread
+from optrack.skeleton.likelihood import log_likelihood
+from optrack.skeleton.model import (
+    LIMITS,
+    PARTITIONS,
+    PARTS,
+    BodyShape,
+    D,
+    forward_kinematics,
+    part_geometry,
+    rest_state,
+)
+
+__all__ = ["facing_candidates", "height_from_cloud", "initialise", "pose_log_likelihood"]
+
+# Spread of the torso's first particles around the guess: metres for the position,
+# radians for the angles (heading, lean, spine and neck).
+_TORSO_SPREAD = np.array([0.06, 0.06, 0.06, 0.35, 0.12, 0.12, 0.2, 0.15, 0.2, 0.2, 0.15, 0.3])
+# The heading search's first diffusion for the limbs, radians.
+_LIMB_SPREAD = 0.5
+# The parts the first torso search is scored on: a standing person's legs are near their
+# rest pose, the arms may be anywhere.
+_TORSO_AND_LEGS = np.array(
+    [k for k, part in enumerate(PARTS) if part.partition in ("torso", "left_leg", "right_leg")]
+)
+_FINE_ROUNDS = 2
+# Points higher than this share of the height are the chest and shoulders.
+_CHEST_BAND = (0.62, 0.8)
+
+
+def height_from_cloud(points: np.ndarray) -> float:
+    """A standing person's height from their cloud (world frame, floor at z = 0): the
+    top of the head, taken as a high percentile so that a stray point does not count."""
+    return float(np.percentile(np.asarray(points)[:, 2], 99.5))
+
+
+def facing_candidates(points: np.ndarray, shape: BodyShape) -> tuple[float, float]:
+    """The two headings (radians) square to the widest horizontal direction of the chest
+    band of the cloud: a standing person's shoulders are wider than their chest is deep."""
+    z = points[:, 2]
+    band = points[(z > _CHEST_BAND[0] * shape.height) & (z < _CHEST_BAND[1] * shape.height)]
+    if len(band) < 3:
+        band = points
+    xy = band[:, :2] - band[:, :2].mean(axis=0)
+    _, vectors = np.linalg.eigh(xy.T @ xy)
+    across = vectors[:, 1]  # the widest direction: the shoulders' line
+    heading = float(np.arctan2(across[1], across[0]) - np.pi / 2)
+    return heading, heading + np.pi
+
+
+def pose_log_likelihood(filt: SkeletonFilter, points: np.ndarray, state: np.ndarray) -> float:
+    """The full-body likelihood (eq. 9, every part) of one pose."""
+    p = filt.params
+    pts, rot = forward_kinematics(np.asarray(state)[None], filt.shape)
+    geometry = part_geometry(pts, rot, filt.shape)
+    expected = filt.expected_support(len(points))
+    return float(
+        log_likelihood(
+            points, geometry, expected, float(p.sigma), float(p.alpha), float(p.support_weight)
+        )[0]
+    )
+
+
+def _from_heading(filt: SkeletonFilter, points: np.ndarray, heading: float) -> np.ndarray:
+    """Coarse to fine from one heading guess; returns the estimate."""
+    p = filt.params
+    layers = int(p.init_layers)
+    centre = np.median(points[:, :2], axis=0)
+    guess = rest_state(filt.shape, float(centre[0]), float(centre[1]), heading)
+    spread = np.zeros(D)
+    spread[:12] = _TORSO_SPREAD
+    filt.reset(guess, spread)
+    filt.anneal(points, "torso", layers, spread, _TORSO_AND_LEGS)
+    for name in ("left_arm", "right_arm", "left_leg", "right_leg"):
+        dims = list(PARTITIONS[name])
+        low, high = LIMITS[dims, 0], LIMITS[dims, 1]
+        filt.particles[:, dims] = filt.rng.uniform(low, high, size=(len(filt.particles), len(dims)))
+        limb_spread = np.zeros(D)
+        limb_spread[dims] = _LIMB_SPREAD
+        filt.anneal(points, name, layers, limb_spread)
+    # The finer rounds: every partition again, from this estimate, as slow frames would.
+    fine = motion_spread(p, float(p.max_dt))
+    for _ in range(_FINE_ROUNDS):
+        filt.reset(filt.estimate, fine)
+        for name in PARTITIONS:
+            filt.anneal(points, name, layers, fine)
+    return filt.estimate.copy()
+
+
+def initialise(filt: SkeletonFilter, points: np.ndarray) -> np.ndarray:
+    """Find a standing person's pose from nothing but their cloud (N, 3), world frame;
+    leaves the filter's particles around it and returns it (D,)."""
+    points = np.asarray(points, dtype=np.float64)
+    best_state, best_score = None, -np.inf
+    for heading in facing_candidates(points, filt.shape):
+        state = _from_heading(filt, points, heading)
+        score = pose_log_likelihood(filt, points, state)
+        if score > best_score:
+            best_state, best_score = state, score
+    filt.reset(best_state)
+    return best_state

@@ -1,0 +1,126 @@
+"""One person's skeleton over time: initialise, track, notice a loss, start again.
+
+:class:`SkeletonTracker` takes the person's fused cloud (world frame, metres,
+floor at z = 0) each frame and returns a :class:`SkeletonEstimate`: the
+joints of optrack/skeleton/joints.py, a confidence per joint, and a state:
+
+- ``initialising``: no pose yet, or one that explains less than
+  ``track_fraction`` of the cloud; the first frame runs the coarse-to-fine
+  search (optrack/skeleton/init.py), the next ones refine it as tracking does;
+- ``tracking``: the estimate explains at least ``track_fraction``;
+- ``lost``: the likelihood collapsed (under ``lost_fraction`` explained, or
+  fewer than ``min_points`` points) for ``lost_frames`` frames in a row; the
+  next frame with enough points initialises again.
+
+A joint's confidence is the support of the areas of interest next to it
+(how many of the points they should hold they hold, capped at 1), times the
+share of the cloud the pose explains.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+import numpy as np
+
+from optrack.params import Params
+from optrack.skeleton.filter import SkeletonFilter
+from optrack.skeleton.init import height_from_cloud, initialise
+from optrack.skeleton.joints import JOINTS
+from optrack.skeleton.model import PARTS, BodyShape, forward_kinematics
+from optrack.skeleton.params import SKELETON_PARAMS
+
+__all__ = ["SkeletonEstimate", "SkeletonTracker", "State"]
+
+State = Literal["initialising", "tracking", "lost"]
+
+
+def _areas_of_joints() -> list[list[tuple[int, int]]]:
+    """For each joint, the (part, half) areas of interest that touch it."""
+    areas: list[list[tuple[int, int]]] = [[] for _ in JOINTS]
+    for k, part in enumerate(PARTS):
+        for half, joint in ((0, part.a), (1, part.b)):
+            if joint in JOINTS:
+                areas[JOINTS.index(joint)].append((k, half))
+    return areas
+
+
+_JOINT_AREAS = _areas_of_joints()
+
+
+@dataclasses.dataclass(frozen=True)
+class SkeletonEstimate:
+    """One person's skeleton at one instant."""
+
+    stamp: float
+    joints: np.ndarray  # (len(JOINTS), 3) world metres, in the order of JOINTS
+    confidence: np.ndarray  # (len(JOINTS),) 0..1
+    state: State
+    explained: float  # share of the cloud within alpha of the model
+    pose: np.ndarray  # (D,) the model's state (optrack/skeleton/model.py)
+
+
+class SkeletonTracker:
+    """Tracks one person's skeleton (see the module docstring)."""
+
+    def __init__(
+        self, params: Params | None = None, shape: BodyShape | None = None, seed: int | None = None
+    ) -> None:
+        self.params = params if params is not None else SKELETON_PARAMS.create()
+        self.shape = shape
+        self._seed = seed
+        self.filter: SkeletonFilter | None = None
+        self.state: State = "initialising"
+        self._stamp: float | None = None
+        self._misses = 0
+
+    def update(self, points_world: np.ndarray, stamp: float) -> SkeletonEstimate:
+        """Take the person's cloud (N, 3) at time ``stamp`` (s); return the estimate."""
+        p = self.params
+        points = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+        points = points[np.all(np.isfinite(points), axis=1)]
+        dt = 0.0 if self._stamp is None else float(stamp) - self._stamp
+        if len(points) < int(p.min_points):
+            return self._miss(float(stamp))
+        self._stamp = float(stamp)
+        if self.filter is None or self.state == "lost":
+            self._start(points)
+        else:
+            self.filter.step(points, dt)
+        explained, support = self.filter.fit(points)
+        if explained < float(p.lost_fraction):
+            return self._miss(float(stamp), explained)
+        self._misses = 0
+        if explained >= float(p.track_fraction):
+            self.state = "tracking"
+        elif self.state != "tracking":
+            self.state = "initialising"
+        return self._estimate(float(stamp), explained, support)
+
+    def _start(self, points: np.ndarray) -> None:
+        if self.shape is None:
+            self.shape = BodyShape.from_height(height_from_cloud(points))
+        self.filter = SkeletonFilter(self.shape, self.params, self._seed)
+        initialise(self.filter, points)
+        self.state = "initialising"
+        self._misses = 0
+
+    def _miss(self, stamp: float, explained: float = 0.0) -> SkeletonEstimate:
+        self._misses += 1
+        if self._misses >= int(self.params.lost_frames):
+            self.state = "lost"
+        return self._estimate(stamp, explained, None)
+
+    def _estimate(self, stamp: float, explained: float, support) -> SkeletonEstimate:
+        if self.filter is None:
+            joints = np.full((len(JOINTS), 3), np.nan)
+            pose = np.full(0, np.nan)
+        else:
+            pose = self.filter.estimate.copy()
+            joints = forward_kinematics(pose, self.filter.shape)[0][: len(JOINTS)]
+        confidence = np.zeros(len(JOINTS))
+        if support is not None and self.state != "lost":
+            for j, areas in enumerate(_JOINT_AREAS):
+                confidence[j] = explained * np.mean([support[k, h] for k, h in areas])
+        return SkeletonEstimate(stamp, joints, confidence, self.state, explained, pose)
