@@ -297,7 +297,7 @@ class BodyShape:
         stature = offsets[[J["pelvis"], J["spine"], J["neck"], J["head"]], 2].sum() + head[2]
         scale = height / stature
         radii = np.array([[*p.radii, *p.radii] for p in CYLINDERS]) * radii_scale
-        return cls(float(height), offsets * scale, radii * height, head * height)
+        return cls(float(height), offsets * scale, radii * scale, head * scale)
 
 
 @dataclasses.dataclass

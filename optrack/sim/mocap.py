@@ -55,8 +55,9 @@ __all__ = [
 ]
 
 BLEND_SECONDS = 0.3  # the pose eases from a loop's last frame into the next loop's first
-TURN_SECONDS = 1.0  # a turn between loops eases in over this long
-PLAN_STEP = 0.2  # s between the path samples that placement checks
+TURN_SECONDS = 0.5  # a turn between loops eases in over this long
+PLAN_STEP = 0.1  # s between the path samples that placement checks
+LOOKAHEAD = 2  # loops a placement looks at: the one it plans and the next
 PLACEMENT_TRIES = 300
 LOOP_TURNS_DEG = (0, 45, -45, 90, -90, 135, -135, 180)
 GROUND_PERCENTILE = 90  # of per-frame lifts: frames standing on the floor, not jumping
@@ -96,6 +97,12 @@ class Motion:
             w[..., None] if np.ndim(w) else w
         )
         return local, hips
+
+    def hips_at(self, tau: np.ndarray) -> np.ndarray:
+        """The hips (n, 3) at ``tau`` (n,) seconds into the motion (interpolated)."""
+        f = np.clip(np.asarray(tau, dtype=np.float64) / self.frame_time, 0.0, len(self.hips) - 1)
+        i = np.minimum(np.floor(f).astype(int), len(self.hips) - 2)
+        return self.hips[i] + (self.hips[i + 1] - self.hips[i]) * (f - i)[:, None]
 
     def headings(self, tau: np.ndarray) -> np.ndarray:
         """Yaw (radians) of the pelvis's forward axis at ``tau`` seconds."""
@@ -299,7 +306,7 @@ class Performance(Behaviour):
         for loop in np.unique(loops):
             here = loops == loop
             yaw, shift = self._transform(int(loop), taus[here])
-            _, hips = self.motion.sample(taus[here])
+            hips = self.motion.hips_at(taus[here])
             out[here] = np.einsum("nij,nj->ni", _rot2(yaw), hips[:, :2] * self.scale) + shift
         return out
 
@@ -362,41 +369,55 @@ def _score(venue: Venue, points: np.ndarray, others: list[np.ndarray]) -> float:
     return score
 
 
-def _place(
-    performer: Performance,
-    venue: Venue,
-    area: np.ndarray,
-    times: np.ndarray,
-    others: list[np.ndarray],
-    rng: np.random.Generator,
-) -> None:
-    """Choose where ``performer`` starts and how far it turns at each loop."""
-    period = performer.motion.period
-    loop_of = np.floor((times + performer.offset) / period).astype(int)  # the first is 0
-    first = times[loop_of == 0]
-    best, best_score = None, -math.inf
-    for _ in range(PLACEMENT_TRIES):
-        point = rng.uniform(area[:2], area[2:])
-        performer.loops = [_Loop(point, float(rng.uniform(-math.pi, math.pi)), 0.0)]
-        score = _score(venue, performer.path(first), [o[loop_of == 0] for o in others])
-        if score > best_score:
-            best, best_score = performer.loops[0], score
-        if score >= 0:
-            break
-    performer.loops = [best]
-    for loop in range(1, loop_of[-1] + 1):
-        chosen, chosen_score = None, -math.inf
-        inside = loop_of == loop
-        for degrees in LOOP_TURNS_DEG:
-            candidate = performer.next_loop(math.radians(degrees))
-            performer.loops.append(candidate)
-            score = _score(venue, performer.path(times[inside]), [o[inside] for o in others])
-            performer.loops.pop()
-            if score > chosen_score:
-                chosen, chosen_score = candidate, score
+class _Planner:
+    """Chooses where a performer starts and how far it turns at each loop, looking one
+    loop ahead (a turn that keeps this loop clear but leaves no way on is not taken)."""
+
+    def __init__(
+        self, performer: Performance, venue: Venue, times: np.ndarray, others: list[np.ndarray]
+    ) -> None:
+        self.performer, self.venue, self.times, self.others = performer, venue, times, others
+        self.loop_of = np.floor((times + performer.offset) / performer.motion.period).astype(int)
+
+    def score(self, loop: int, depth: int = LOOKAHEAD) -> float:
+        """How clear the planned ``loop`` (the last one) and the best next one stay."""
+        inside = self.loop_of == loop
+        if not inside.any():
+            return math.inf
+        points = self.performer.path(self.times[inside])
+        score = _score(self.venue, points, [o[inside] for o in self.others])
+        if depth > 1 and loop < self.loop_of[-1]:
+            score = min(score, max(self.score_turn(t, loop + 1, depth - 1) for t in self.turns))
+        return score
+
+    turns = tuple(math.radians(d) for d in LOOP_TURNS_DEG)
+
+    def score_turn(self, turn: float, loop: int, depth: int = LOOKAHEAD) -> float:
+        self.performer.loops.append(self.performer.next_loop(turn))
+        try:
+            return self.score(loop, depth)
+        finally:
+            self.performer.loops.pop()
+
+    def place(self, area: np.ndarray, rng: np.random.Generator) -> None:
+        performer = self.performer
+        best, best_score = None, -math.inf
+        for _ in range(PLACEMENT_TRIES):
+            point = rng.uniform(area[:2], area[2:])
+            performer.loops = [_Loop(point, float(rng.uniform(-math.pi, math.pi)), 0.0)]
+            score = self.score(0)
+            if score > best_score:
+                best, best_score = performer.loops[0], score
             if score >= 0:
                 break
-        performer.loops.append(chosen)
+        performer.loops = [best]
+        for loop in range(1, self.loop_of[-1] + 1):
+            scores = []
+            for turn in self.turns:
+                scores.append(self.score_turn(turn, loop))
+                if scores[-1] >= 0:
+                    break
+            performer.loops.append(performer.next_loop(self.turns[int(np.argmax(scores))]))
 
 
 def add_performers(
@@ -421,7 +442,7 @@ def add_performers(
         performer = Performance(motion, motion.period * (k // len(motions)) / sharing)
         index = crowd.add(performer)
         performer.fit(body.shape(index, crowd.people[index].height))
-        _place(performer, crowd.venue, crowd.area, times, paths, crowd.rng)
+        _Planner(performer, crowd.venue, times, paths).place(crowd.area, crowd.rng)
         paths.append(performer.path(times))
         added.append(index)
     return added
