@@ -168,8 +168,10 @@ class SkeletonFilter:
             beta = annealing_exponent(ll, float(p.survival_rate))
             w = np.exp(beta * (ll - ll.max()))
             w /= w.sum()
-            if layer == layers - 1:
-                self.estimate[idx] = _weighted_mean(self.particles[:, idx], w, dims)
+            if layer == layers - 1:  # the estimate: the mean of the best few
+                sharp = annealing_exponent(ll, float(p.estimate_survival))
+                best = np.exp(sharp * (ll - ll.max()))
+                self.estimate[idx] = _weighted_mean(self.particles[:, idx], best / best.sum(), dims)
             chosen = systematic_resample(w, self.rng)
             self.particles[:, idx] = self.particles[chosen][:, idx]
             if layer < layers - 1:

@@ -75,6 +75,15 @@ SKELETON_PARAMS = register(
                 "alpha); sets each layer's exponent.",
             ),
             Param(
+                "estimate_survival",
+                0.1,
+                min=0.001,
+                max=1.0,
+                step=0.01,
+                help="The estimate is the particles' weighted mean, with an exponent that keeps "
+                "this share of them effective (the best few).",
+            ),
+            Param(
                 "anneal_decay",
                 0.6,
                 min=0.1,

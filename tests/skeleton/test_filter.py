@@ -1,0 +1,76 @@
+"""The annealed particle filter: its pieces, and recovering a known pose from its cloud."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optrack.params import REGISTRY
+from optrack.skeleton.filter import (
+    SkeletonFilter,
+    annealing_exponent,
+    motion_spread,
+    systematic_resample,
+)
+from optrack.skeleton.joints import JOINTS
+from optrack.skeleton.model import BodyShape, D, forward_kinematics, rest_state
+from optrack.skeleton.params import SKELETON_PARAMS
+from tests.skeleton.clouds import seen_cloud
+
+
+def test_every_knob_is_in_the_registered_schema_with_help():
+    assert REGISTRY["skeleton"] is SKELETON_PARAMS
+    assert SKELETON_PARAMS["particles"].default == 2000
+    for param in SKELETON_PARAMS:
+        assert param.help and param.min is not None and param.max is not None
+
+
+def test_annealing_exponent_keeps_the_survival_rate():
+    rng = np.random.default_rng(0)
+    ll = rng.normal(0.0, 3.0, 1000)
+    for rate in (0.2, 0.5, 0.8):
+        beta = annealing_exponent(ll, rate)
+        w = np.exp(beta * (ll - ll.max()))
+        assert w.sum() ** 2 / np.sum(w * w) == pytest.approx(rate * 1000, rel=0.01)
+
+
+def test_systematic_resampling_follows_the_weights():
+    weights = np.array([0.5, 0.25, 0.25, 0.0])
+    counts = np.bincount(
+        systematic_resample(weights, np.random.default_rng(1)).repeat(1), minlength=4
+    )
+    assert list(counts) == [2, 1, 1, 0]
+
+
+def test_motion_spread_grows_with_time_up_to_max_dt():
+    params = SKELETON_PARAMS.create({"agility_arms_rad": 6.0, "max_dt": 0.1})
+    assert motion_spread(params, 1 / 30)[12] == pytest.approx(6.0 / 30)
+    assert motion_spread(params, 5.0)[12] == pytest.approx(0.6)
+
+
+def _pose(shape: BodyShape) -> np.ndarray:
+    truth = rest_state(shape, 1.0, -0.5, 2.3)
+    truth[6], truth[8] = 0.15, -0.2  # bent forward a little, turned
+    truth[12], truth[13], truth[15] = 0.9, 0.3, 1.3  # left arm forward, elbow bent
+    truth[17], truth[19] = 1.0, 0.4  # right arm out to the side
+    truth[20], truth[23] = 0.6, 0.9  # left leg lifted, knee bent
+    truth[24], truth[27] = -0.1, 0.1
+    return truth
+
+
+@pytest.mark.parametrize(("sensors", "worst"), [(2, 0.12), (3, 0.10)])
+def test_filter_recovers_a_known_pose_from_its_own_cloud(sensors, worst):
+    rng = np.random.default_rng(sensors)
+    shape = BodyShape.from_height(1.75)
+    truth = _pose(shape)
+    joints = forward_kinematics(truth, shape)[0][: len(JOINTS)]
+    start = truth.copy()
+    start[:3] += [0.05, -0.04, 0.03]
+    start[3:] += rng.normal(0.0, 0.15, D - 3)
+    filt = SkeletonFilter(shape, SKELETON_PARAMS.create(), seed=0)
+    filt.reset(start)
+    for _ in range(6):
+        estimate = filt.step(seen_cloud(truth, shape, rng, sensors=sensors), 1 / 30)
+    error = np.linalg.norm(forward_kinematics(estimate, shape)[0][: len(JOINTS)] - joints, axis=1)
+    assert error.mean() < 0.04, error.round(3)
+    assert error.max() < worst, error.round(3)  # the head, the least constrained, is worst
