@@ -164,3 +164,15 @@ def test_people_have_shapes_of_their_own_only_where_asked():
     for shape in shapes + [plain]:
         state_height = shape.offsets[[0, 1, 2, 3], 2].sum() + shape.head[2]
         assert state_height == pytest.approx(1.75)  # everyone keeps their height
+
+
+def test_the_same_seed_gives_the_same_performance(shared_data):
+    clip = str(shared_data / "mocap" / "cmu_01_01_jumps_turnaround.bvh")
+    first, second = (
+        Simulation("mocap", seed=7, people=2, seconds=3.0, clips=[clip, "wave"]) for _ in range(2)
+    )
+    for t in (0.0, 1.1, 2.9):
+        a = first.truth(first.snapshot(t), visibility=False)
+        assert a == second.truth(second.snapshot(t), visibility=False)
+    other = Simulation("mocap", seed=8, people=2, seconds=3.0, clips=[clip, "wave"])
+    assert other.truth(other.snapshot(2.9), visibility=False) != a
