@@ -43,6 +43,7 @@ from optrack.sim.articulated import (
 from optrack.sim.body import BodyModel, BodyShape, BodyState, ground
 from optrack.sim.bvh import BVH_TO_WORLD, BvhClip, map_joints, metres_per_unit, read_bvh
 from optrack.sim.crowd import Behaviour, Crowd, CrowdState
+from optrack.sim.scenario import PeopleSpec
 from optrack.sim.venue import Venue
 
 __all__ = [
@@ -58,7 +59,7 @@ BLEND_SECONDS = 0.3  # the pose eases from a loop's last frame into the next loo
 TURN_SECONDS = 0.5  # a turn between loops eases in over this long
 PLAN_STEP = 0.1  # s between the path samples that placement checks
 LOOKAHEAD = 2  # loops a placement looks at: the one it plans and the next
-PLACEMENT_TRIES = 300
+PLACEMENT_TRIES = 100
 LOOP_TURNS_DEG = (0, 45, -45, 90, -90, 135, -135, 180)
 GROUND_PERCENTILE = 90  # of per-frame lifts: frames standing on the floor, not jumping
 BODY_CLEARANCE = 0.3  # m kept between a performer's pelvis and walls or furniture
@@ -360,10 +361,11 @@ def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------ placing
 
 
-def _score(venue: Venue, points: np.ndarray, others: list[np.ndarray]) -> float:
-    """How far the path ``points`` (n, 2) stays clear of the venue and of the others'
-    paths at the same instants (negative: too close somewhere)."""
-    score = float(venue.clearance(points).min()) - BODY_CLEARANCE
+def _score(venue: Venue, area: np.ndarray, points: np.ndarray, others: list[np.ndarray]) -> float:
+    """How far the path ``points`` (n, 2) stays inside ``area`` (x0, y0, x1, y1), clear
+    of the venue and of the others' paths at the same instants (negative: too close)."""
+    inside = np.minimum(points - area[:2], area[2:] - points).min()
+    score = min(float(inside), float(venue.clearance(points).min()) - BODY_CLEARANCE)
     for other in others:
         score = min(score, float(np.linalg.norm(points - other, axis=1).min()) - SEPARATION)
     return score
@@ -374,9 +376,15 @@ class _Planner:
     loop ahead (a turn that keeps this loop clear but leaves no way on is not taken)."""
 
     def __init__(
-        self, performer: Performance, venue: Venue, times: np.ndarray, others: list[np.ndarray]
+        self,
+        performer: Performance,
+        venue: Venue,
+        area: np.ndarray,
+        times: np.ndarray,
+        others: list[np.ndarray],
     ) -> None:
-        self.performer, self.venue, self.times, self.others = performer, venue, times, others
+        self.performer, self.venue, self.area = performer, venue, area
+        self.times, self.others = times, others
         self.loop_of = np.floor((times + performer.offset) / performer.motion.period).astype(int)
 
     def score(self, loop: int, depth: int = LOOKAHEAD) -> float:
@@ -385,7 +393,7 @@ class _Planner:
         if not inside.any():
             return math.inf
         points = self.performer.path(self.times[inside])
-        score = _score(self.venue, points, [o[inside] for o in self.others])
+        score = _score(self.venue, self.area, points, [o[inside] for o in self.others])
         if depth > 1 and loop < self.loop_of[-1]:
             score = min(score, max(self.score_turn(t, loop + 1, depth - 1) for t in self.turns))
         return score
@@ -399,11 +407,11 @@ class _Planner:
         finally:
             self.performer.loops.pop()
 
-    def place(self, area: np.ndarray, rng: np.random.Generator) -> None:
+    def place(self, rng: np.random.Generator) -> None:
         performer = self.performer
         best, best_score = None, -math.inf
         for _ in range(PLACEMENT_TRIES):
-            point = rng.uniform(area[:2], area[2:])
+            point = rng.uniform(self.area[:2], self.area[2:])
             performer.loops = [_Loop(point, float(rng.uniform(-math.pi, math.pi)), 0.0)]
             score = self.score(0)
             if score > best_score:
@@ -423,6 +431,7 @@ class _Planner:
 def add_performers(
     crowd: Crowd,
     body: BodyModel,
+    spec: PeopleSpec,
     clips: list[str],
     count: int,
     seconds: float,
@@ -430,9 +439,10 @@ def add_performers(
 ) -> list[int]:
     """Add ``count`` people performing ``clips`` (person k plays clip k modulo their
     number; people sharing a clip start at different points of it), each placed and
-    turned in the venue; returns their indices in the crowd."""
+    turned in the venue, in ``spec.area`` when it gives one; returns their indices."""
     if not clips:
         return []
+    area = np.asarray(spec.area if spec.area is not None else crowd.area, dtype=np.float64)
     motions = [load_motion(clip, base) for clip in clips]
     times = np.arange(0.0, max(seconds, PLAN_STEP), PLAN_STEP)
     added, paths = [], []
@@ -442,7 +452,7 @@ def add_performers(
         performer = Performance(motion, motion.period * (k // len(motions)) / sharing)
         index = crowd.add(performer)
         performer.fit(body.shape(index, crowd.people[index].height))
-        _Planner(performer, crowd.venue, times, paths).place(crowd.area, crowd.rng)
+        _Planner(performer, crowd.venue, area, times, paths).place(crowd.rng)
         paths.append(performer.path(times))
         added.append(index)
     return added

@@ -199,7 +199,9 @@ class Simulation:
             self._add_operator(params.get("sim_board") or BOARD_PARAMS.create(), seconds)
         clips = list(clips or self.scenario.people.clips)
         base = str(Path(self.scenario.source).parent) if self.scenario.source else None
-        performers = add_performers(self.crowd, self.body, clips, count, self.seconds, base)
+        performers = add_performers(
+            self.crowd, self.body, self.scenario.people, clips, count, self.seconds, base
+        )
         self.crowd.populate(self.scenario.people, count - len(performers), self.seconds)
         self._renderers: dict[tuple, SensorRenderer] = {}
         self._noise: dict[int, np.random.Generator] = {}
