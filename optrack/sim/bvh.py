@@ -324,36 +324,30 @@ def _sided(pattern: dict[str, tuple[str, ...]]) -> dict[str, tuple[str, ...]]:
     return out
 
 
+# CMU's and Mixamo's limbs: LeftArm is the shoulder (LeftShoulder the collar bone).
+_UPLEG_LIMBS = _sided(
+    {
+        "shoulder": ("{side}arm",),
+        "elbow": ("{side}forearm",),
+        "wrist": ("{side}hand",),
+        "hip": ("{side}upleg",),
+        "knee": ("{side}leg",),
+        "ankle": ("{side}foot",),
+    }
+)
+
 CONVENTIONS: tuple[tuple[str, frozenset[str], dict[str, tuple[str, ...]]], ...] = (
     (
         "CMU (LeftUpLeg/LeftLeg/LeftFoot)",
         frozenset({"lowerback", "leftupleg"}),
         {"pelvis": ("hips",), "spine": ("spine",), "neck": ("neck",), "head": ("head",)}
-        | _sided(
-            {
-                "shoulder": ("{side}arm",),
-                "elbow": ("{side}forearm",),
-                "wrist": ("{side}hand",),
-                "hip": ("{side}upleg",),
-                "knee": ("{side}leg",),
-                "ankle": ("{side}foot",),
-            }
-        ),
+        | _UPLEG_LIMBS,
     ),
     (
         "Mixamo (mixamorig:LeftUpLeg, Spine1, Spine2)",
         frozenset({"spine2", "leftupleg"}),
         {"pelvis": ("hips",), "spine": ("spine1",), "neck": ("neck",), "head": ("head",)}
-        | _sided(
-            {
-                "shoulder": ("{side}arm",),
-                "elbow": ("{side}forearm",),
-                "wrist": ("{side}hand",),
-                "hip": ("{side}upleg",),
-                "knee": ("{side}leg",),
-                "ankle": ("{side}foot",),
-            }
-        ),
+        | _UPLEG_LIMBS,
     ),
     (
         "LeftHip/LeftKnee/LeftAnkle",
@@ -392,7 +386,7 @@ CONVENTIONS: tuple[tuple[str, frozenset[str], dict[str, tuple[str, ...]]], ...] 
     ),
 )
 
-# The tips of the hand, foot and head, by the BVH joint they are a descendant of.
+# The BVH joints that tip the hands and feet (the head's tip is its End Site).
 _TIP_NAMES = {
     "hand": ("{side}handindex1", "{side}handmiddle1", "{s}fingers", "{s} finger2"),
     "toe": ("{side}toebase", "{side}toe", "{s} toe0"),
