@@ -503,10 +503,10 @@ class BodyModel:
             shapes = [BodyShape.standard(h) for h in np.asarray(pose.height, dtype=float)]
         state = self.posed(self.walk(pose), shapes)
         if pose.wrist_targets is not None:
-            state = self._reach(state, np.asarray(pose.wrist_targets, dtype=np.float64), shapes)
+            state = self.reach(state, np.asarray(pose.wrist_targets, dtype=np.float64), shapes)
         return state
 
-    def _reach(self, state: BodyState, targets: np.ndarray, shapes: list[BodyShape]) -> BodyState:
+    def reach(self, state: BodyState, targets: np.ndarray, shapes: list[BodyShape]) -> BodyState:
         """Bend arms so the wrists reach their targets (two-link inverse kinematics,
         law of cosines), the elbow hanging down and out; the angles follow."""
         world, rotations = state.joints, state.rotations.copy()

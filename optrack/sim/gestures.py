@@ -63,7 +63,7 @@ def _times(seconds: float) -> np.ndarray:
     return np.linspace(0.0, seconds, int(round(seconds * RATE)) + 1)
 
 
-def _standing(body: BodyModel, t: np.ndarray, **gait: np.ndarray | float) -> BodyPose:
+def _standing(t: np.ndarray, **gait: np.ndarray | float) -> BodyPose:
     n = len(t)
     values = {
         "x": 0.0,
@@ -93,7 +93,7 @@ def _walk(body: BodyModel) -> tuple[np.ndarray, ArticulatedPose]:
     speed = float(body.params.full_gait_speed)
     period = float(body.params.stride_per_height) * REFERENCE_HEIGHT / speed
     t = _times(period)
-    pose = body.walk(_standing(body, t, x=speed * t, phase=2 * np.pi * t / period, amplitude=1.0))
+    pose = body.walk(_standing(t, x=speed * t, phase=2 * np.pi * t / period, amplitude=1.0))
     return t, pose
 
 
@@ -104,12 +104,12 @@ def _turn(body: BodyModel) -> tuple[np.ndarray, ArticulatedPose]:
         "phase": 4 * np.pi * t / TURN_SECONDS,
         "amplitude": TURN_AMPLITUDE,
     }
-    return t, body.walk(_standing(body, t, **gait))
+    return t, body.walk(_standing(t, **gait))
 
 
 def _wave(body: BodyModel) -> tuple[np.ndarray, ArticulatedPose]:
     t = _times(WAVE_SECONDS)
-    pose = body.walk(_standing(body, t))
+    pose = body.walk(_standing(t))
     rotations = _globals(pose.local)
     raised = (_ease(t / WAVE_RAISE) * _ease((WAVE_SECONDS - t) / WAVE_RAISE))[:, None]
     hang_upper = rotations[:, J["right_shoulder"]] @ np.array([0.0, 0.0, -1.0])
@@ -126,7 +126,7 @@ def _crouch(body: BodyModel) -> tuple[np.ndarray, ArticulatedPose]:
     t = _times(CROUCH_SECONDS)
     a, b, c, d = CROUCH_KEYS
     depth = _ease((t - a) / (b - a)) * _ease((d - t) / (d - c))
-    pose = body.walk(_standing(body, t))
+    pose = body.walk(_standing(t))
     rotations = _globals(pose.local)
     hip, knee = CROUCH_HIP * depth, CROUCH_KNEE * depth
     lean = axis_rotations(1, CROUCH_LEAN * depth)

@@ -88,22 +88,22 @@ class Motion:
         """Seconds from the first frame to the last (a loop's length)."""
         return (len(self.local) - 1) * self.frame_time
 
-    def sample(self, tau: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Local quaternions and hips at ``tau`` seconds into the motion (interpolated)."""
-        f = np.clip(np.asarray(tau, dtype=np.float64) / self.frame_time, 0.0, len(self.local) - 1)
-        i = np.minimum(np.floor(f).astype(int), len(self.local) - 2)
-        w = f - i
-        local = blend(self.local[i], self.local[i + 1], w[..., None] if np.ndim(w) else w)
-        hips = self.hips[i] + (self.hips[i + 1] - self.hips[i]) * (
-            w[..., None] if np.ndim(w) else w
-        )
-        return local, hips
+    def _frames(self, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The frame before each of the times ``tau`` (n,) and how far past it, 0-1."""
+        f = np.clip(np.asarray(tau, dtype=np.float64) / self.frame_time, 0.0, len(self.hips) - 1)
+        i = np.minimum(np.floor(f).astype(int), len(self.hips) - 2)
+        return i, f - i
+
+    def sample(self, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Local quaternions (n, J, 4) and hips (n, 3) at ``tau`` (n,) seconds into the
+        motion (interpolated)."""
+        i, w = self._frames(tau)
+        return blend(self.local[i], self.local[i + 1], w[:, None]), self.hips_at(tau)
 
     def hips_at(self, tau: np.ndarray) -> np.ndarray:
         """The hips (n, 3) at ``tau`` (n,) seconds into the motion (interpolated)."""
-        f = np.clip(np.asarray(tau, dtype=np.float64) / self.frame_time, 0.0, len(self.hips) - 1)
-        i = np.minimum(np.floor(f).astype(int), len(self.hips) - 2)
-        return self.hips[i] + (self.hips[i + 1] - self.hips[i]) * (f - i)[:, None]
+        i, w = self._frames(tau)
+        return self.hips[i] + (self.hips[i + 1] - self.hips[i]) * w[:, None]
 
     def headings(self, tau: np.ndarray) -> np.ndarray:
         """Yaw (radians) of the pelvis's forward axis at ``tau`` seconds."""
@@ -473,5 +473,5 @@ def pose_people(
             grounded[k] = behaviour.motion.grounded
     posed = body.posed(pose, shapes, grounded)
     if state.pose.wrist_targets is not None:
-        posed = body._reach(posed, np.asarray(state.pose.wrist_targets, dtype=np.float64), shapes)
+        posed = body.reach(posed, np.asarray(state.pose.wrist_targets, dtype=np.float64), shapes)
     return posed, shapes

@@ -508,7 +508,7 @@ class Simulation:
         decimals = int(self.params.truth_decimals)
         fractions = self.visible_fractions(state) if visibility else None
         people = []
-        tops = state.body.head_tops(state.shapes) if state.body is not None else []
+        tops = state.body.head_tops(state.shapes)
         for k, person_id in enumerate(state.crowd.ids):
             joints, angles = state.body.truth(k, decimals)
             people.append(
