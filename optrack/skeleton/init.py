@@ -41,6 +41,10 @@ _TORSO_AND_LEGS = np.array(
     [k for k, part in enumerate(PARTS) if part.partition in ("torso", "left_leg", "right_leg")]
 )
 _FINE_ROUNDS = 2
+# Heights (shares of the height) of the feet, and of the shins above them; how far ahead
+# of the shins (m) the feet must reach to tell the heading without trying both.
+_FEET_BAND = (0.05, 0.2)
+_FEET_AHEAD = 0.02
 # Points higher than this share of the height are the chest and shoulders.
 _CHEST_BAND = (0.62, 0.8)
 
@@ -51,9 +55,13 @@ def height_from_cloud(points: np.ndarray) -> float:
     return float(np.percentile(np.asarray(points)[:, 2], 99.5))
 
 
-def facing_candidates(points: np.ndarray, shape: BodyShape) -> tuple[float, float]:
-    """The two headings (radians) square to the widest horizontal direction of the chest
-    band of the cloud: a standing person's shoulders are wider than their chest is deep."""
+def facing_candidates(points: np.ndarray, shape: BodyShape) -> tuple[tuple[float, ...], bool]:
+    """The headings (radians) to try, most likely first, and whether the first is sure.
+
+    Both are square to the widest horizontal direction of the chest band of the cloud
+    (a standing person's shoulders are wider than their chest is deep). The feet tell
+    which way: the points at the floor reach further forward than the shins above
+    them; when they do by more than ``_FEET_AHEAD`` metres, only that heading is tried."""
     z = points[:, 2]
     band = points[(z > _CHEST_BAND[0] * shape.height) & (z < _CHEST_BAND[1] * shape.height)]
     if len(band) < 3:
@@ -62,7 +70,16 @@ def facing_candidates(points: np.ndarray, shape: BodyShape) -> tuple[float, floa
     _, vectors = np.linalg.eigh(xy.T @ xy)
     across = vectors[:, 1]  # the widest direction: the shoulders' line
     heading = float(np.arctan2(across[1], across[0]) - np.pi / 2)
-    return heading, heading + np.pi
+    feet = points[z < _FEET_BAND[0] * shape.height]
+    shins = points[(z > _FEET_BAND[0] * shape.height) & (z < _FEET_BAND[1] * shape.height)]
+    if len(feet) < 3 or len(shins) < 3:
+        return (heading, heading + np.pi), False
+    ahead = float(
+        (feet[:, :2].mean(axis=0) - shins[:, :2].mean(axis=0)) @ [np.cos(heading), np.sin(heading)]
+    )
+    if ahead < 0:
+        heading += np.pi
+    return (heading, heading + np.pi), abs(ahead) > _FEET_AHEAD
 
 
 def pose_log_likelihood(filt: SkeletonFilter, points: np.ndarray, state: np.ndarray) -> float:
@@ -109,7 +126,8 @@ def initialise(filt: SkeletonFilter, points: np.ndarray) -> np.ndarray:
     leaves the filter's particles around it and returns it (D,)."""
     points = np.asarray(points, dtype=np.float64)
     best_state, best_score = None, -np.inf
-    for heading in facing_candidates(points, filt.shape):
+    headings, sure = facing_candidates(points, filt.shape)
+    for heading in headings[:1] if sure else headings:
         state = _from_heading(filt, points, heading)
         score = pose_log_likelihood(filt, points, state)
         if score > best_score:

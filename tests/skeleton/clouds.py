@@ -23,14 +23,14 @@ def seen_cloud(
     distance: float = 3.0,
 ) -> np.ndarray:
     """(<= points, 3) world points of the body at ``state`` seen by ``sensors`` sensors
-    evenly around it at ``distance`` metres, 1.6 m high."""
+    evenly around it at ``distance`` metres, 2.5 m high (looking down, as mounted)."""
     surface, normal = surface_points(state, shape, 20 * points, rng)
     angles = np.arange(sensors) * 2.0 * np.pi / sensors + 0.3
     centres = np.stack(
         [
             state[0] + distance * np.cos(angles),
             state[1] + distance * np.sin(angles),
-            np.full(sensors, 1.6),
+            np.full(sensors, 2.5),
         ],
         axis=1,
     )

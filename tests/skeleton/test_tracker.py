@@ -1,0 +1,97 @@
+"""Initialisation from a standing pose, the tracker's states, and the shape estimate."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optrack.skeleton.filter import SkeletonFilter
+from optrack.skeleton.init import facing_candidates, height_from_cloud, initialise
+from optrack.skeleton.joints import JOINTS
+from optrack.skeleton.model import BodyShape, forward_kinematics, rest_state
+from optrack.skeleton.params import SKELETON_PARAMS
+from optrack.skeleton.shape import estimate_shape
+from optrack.skeleton.tracker import SkeletonTracker
+from tests.skeleton.clouds import seen_cloud
+
+SHAPE = BodyShape.from_height(1.75)
+
+
+def standing(rng: np.random.Generator, heading: float) -> np.ndarray:
+    """A standing pose: arms anywhere in half their range, legs nearly straight."""
+    state = rest_state(SHAPE, 0.4, -0.3, heading)
+    state[12:20] = rng.uniform([-0.3, -0.2, -0.6, 0.0] * 2, [1.5, 1.4, 0.6, 1.4] * 2)
+    state[20:28] = rng.uniform([-0.1, -0.1, -0.2, 0.0] * 2, [0.2, 0.2, 0.2, 0.2] * 2)
+    return state
+
+
+def joint_errors(state: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    a = forward_kinematics(state, SHAPE)[0][: len(JOINTS)]
+    return np.linalg.norm(a - forward_kinematics(truth, SHAPE)[0][: len(JOINTS)], axis=1)
+
+
+def test_height_and_heading_from_the_cloud():
+    rng = np.random.default_rng(0)
+    truth = rest_state(SHAPE, 0.0, 0.0, 0.7)
+    cloud = seen_cloud(truth, SHAPE, rng, noise=0.0)
+    assert height_from_cloud(cloud) == pytest.approx(1.75, abs=0.06)
+    headings, sure = facing_candidates(cloud, SHAPE)
+    gap = np.angle(np.exp(1j * (np.array(headings) - 0.7)))
+    assert sure and abs(gap[0]) < 0.15 and abs(gap[1]) > np.pi - 0.15  # the feet tell front
+
+
+@pytest.mark.parametrize("seed", [2, 3])
+def test_initialisation_finds_a_standing_pose_from_nothing(seed):
+    rng = np.random.default_rng(seed)
+    truth = standing(rng, rng.uniform(-np.pi, np.pi))
+    filt = SkeletonFilter(SHAPE, SKELETON_PARAMS.create(), seed=seed)
+    state = initialise(filt, seen_cloud(truth, SHAPE, rng))
+    error = joint_errors(state, truth)
+    assert error.mean() < 0.10, error.round(3)
+
+
+def test_tracker_initialises_tracks_loses_and_starts_again():
+    rng = np.random.default_rng(4)
+    truth = standing(rng, 1.0)
+    tracker = SkeletonTracker(SKELETON_PARAMS.create({"lost_frames": 3}), SHAPE, seed=0)
+    states = [tracker.update(seen_cloud(truth, SHAPE, rng), t / 30).state for t in range(4)]
+    assert states[0] in ("initialising", "tracking") and states[-1] == "tracking"
+    estimate = tracker.update(seen_cloud(truth, SHAPE, rng), 4 / 30)
+    assert estimate.joints.shape == (len(JOINTS), 3) and estimate.explained > 0.7
+    assert joint_errors(estimate.pose, truth).mean() < 0.08
+    assert np.all((estimate.confidence > 0) & (estimate.confidence <= 1))
+    # The person leaves (no points): a few misses, then lost.
+    gone = [tracker.update(np.zeros((0, 3)), (5 + t) / 30).state for t in range(3)]
+    assert gone == ["tracking", "tracking", "lost"]
+    assert not np.any(tracker.update(np.zeros((0, 3)), 9 / 30).confidence)
+    # Back again, elsewhere: initialised from scratch.
+    moved = truth.copy()
+    moved[0] += 1.5
+    back = tracker.update(seen_cloud(moved, SHAPE, rng), 10 / 30)
+    assert back.state in ("initialising", "tracking")
+    assert np.linalg.norm(back.joints[0] - forward_kinematics(moved, SHAPE)[0][0]) < 0.1
+
+
+def test_a_hidden_wrist_gets_a_lower_confidence():
+    rng = np.random.default_rng(6)
+    truth = standing(rng, 0.0)
+    tracker = SkeletonTracker(seed=0, shape=SHAPE)
+    wrist = forward_kinematics(truth, SHAPE)[0][JOINTS.index("left_wrist")]
+    for t in range(3):
+        cloud = seen_cloud(truth, SHAPE, rng)
+        estimate = tracker.update(cloud[np.linalg.norm(cloud - wrist, axis=1) > 0.15], t / 30)
+    confidence = dict(zip(JOINTS, estimate.confidence, strict=True))
+    assert confidence["left_wrist"] < 0.5 * confidence["right_wrist"]
+
+
+def test_shape_estimate_moves_towards_the_persons_own_body():
+    rng = np.random.default_rng(7)
+    truth_shape = SHAPE.scaled(arms=1.12, limb_radius=1.25)
+    poses = [standing(rng, 0.5)]
+    clouds = [seen_cloud(p, truth_shape, rng) for p in poses]
+    params = SKELETON_PARAMS.create()
+    estimate, _ = estimate_shape(clouds, poses, SHAPE, params)
+    arms = estimate.upper_arm / SHAPE.upper_arm
+    radius = estimate.radii[3][0] / SHAPE.radii[3][0]
+    assert 1.0 < arms < 1.2  # towards the longer arms (lengths are weakly seen from one pose)
+    assert abs(radius - 1.25) < abs(1.0 - 1.25) / 2  # more than half way to the thicker limbs
