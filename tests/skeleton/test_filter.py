@@ -69,7 +69,7 @@ def test_filter_recovers_a_known_pose_from_its_own_cloud(sensors, worst):
     start[3:] += rng.normal(0.0, 0.15, D - 3)
     filt = SkeletonFilter(shape, SKELETON_PARAMS.create(), seed=0)
     filt.reset(start)
-    for _ in range(6):
+    for _ in range(10):
         estimate = filt.step(seen_cloud(truth, shape, rng, sensors=sensors), 1 / 30)
     error = np.linalg.norm(forward_kinematics(estimate, shape)[0][: len(JOINTS)] - joints, axis=1)
     assert error.mean() < 0.04, error.round(3)
