@@ -15,25 +15,19 @@ import statistics
 import sys
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
 
-from optrack.detection.ground import (
-    GroundError,
-    ground_from_pixels,
-    ground_from_points,
-    parse_ground,
-    semi_automatic_ground,
-)
-from optrack.detection.params import SENSOR_MODELS, detection_params
-from optrack.detection.pipeline import PeopleDetector
-from optrack.detection.preprocessing import OrganisedCloud, select_points, voxel_grid
 from optrack.errors import UserError
-from optrack.geometry import Plane
-from optrack.params import Params, load_config
-from optrack.types import DetectionBatch, Intrinsics, RGBDFrame
+
+if TYPE_CHECKING:
+    from optrack.detection.pipeline import PeopleDetector
+    from optrack.detection.preprocessing import OrganisedCloud
+    from optrack.geometry import Plane
+    from optrack.params import Params
+    from optrack.types import DetectionBatch, Intrinsics, RGBDFrame
 
 __all__ = ["DetectError", "add_commands", "cmd_detect"]
 
@@ -50,6 +44,8 @@ def _info(message: str) -> None:
 
 def _config_overrides(path: str | None) -> dict[str, Any]:
     """The ``detection`` values a YAML config file sets (the whole file is validated)."""
+    from optrack.params import load_config
+
     if not path:
         return {}
     load_config(path)  # validates every stage, with one clear sentence on error
@@ -58,6 +54,8 @@ def _config_overrides(path: str | None) -> dict[str, Any]:
 
 
 def _params(args: argparse.Namespace, model: str | None) -> Params:
+    from optrack.detection.params import SENSOR_MODELS, detection_params
+
     chosen = args.sensor_model or model
     if chosen and chosen not in SENSOR_MODELS:
         chosen = None  # a camera optrack has no figures for: the generic defaults
@@ -65,6 +63,8 @@ def _params(args: argparse.Namespace, model: str | None) -> Params:
 
 
 def _intrinsics(args: argparse.Namespace, what: str, width: int, height: int) -> Intrinsics:
+    from optrack.types import Intrinsics
+
     if not args.intrinsics:
         raise DetectError(
             f"{what} needs the camera intrinsics; give --intrinsics fx,fy,cx,cy (pixels), "
@@ -75,6 +75,8 @@ def _intrinsics(args: argparse.Namespace, what: str, width: int, height: int) ->
 
 def _numbers(text: str, option: str, groups: int, size: int, example: str) -> list[list[float]]:
     """``groups`` groups of ``size`` numbers from ``"a,b;c,d;..."`` (an option's value)."""
+    from optrack.detection.ground import GroundError
+
     parts = [g for g in text.split(";") if g.strip()]
     try:
         values = [[float(v) for v in g.replace(",", " ").split()] for g in parts]
@@ -95,6 +97,15 @@ def _ground_option(
     """The floor the operator gave (``--ground``, ``--ground-points``,
     ``--ground-pixels`` or ``--ground-pick``) and how, or (None, "") for automatic.
     ``cloud`` is the frame the pixels and the pick refer to."""
+    from optrack.detection.ground import (
+        GroundError,
+        ground_from_pixels,
+        ground_from_points,
+        parse_ground,
+        semi_automatic_ground,
+    )
+    from optrack.detection.preprocessing import select_points, voxel_grid
+
     if getattr(args, "ground", None):
         return parse_ground(args.ground), "manual"
     if getattr(args, "ground_points", None):
@@ -142,6 +153,10 @@ def _detection_json(batch: DetectionBatch, camera_frame: bool) -> list[dict[str,
 
 def _single(args: argparse.Namespace, source: Path) -> dict[str, Any]:
     """A .pcd file or a depth image: one frame, camera-frame output."""
+    from optrack.detection.pipeline import PeopleDetector
+    from optrack.detection.preprocessing import OrganisedCloud
+    from optrack.types import RGBDFrame
+
     if source.suffix.lower() == ".pcd":
         import open3d as o3d
 
@@ -237,6 +252,9 @@ def _frames(args: argparse.Namespace) -> Iterator[tuple[RGBDFrame, Any]]:
 def _stream(args: argparse.Namespace) -> dict[str, Any]:
     """A recording or a live sensor: frame after frame, one detector per sensor (the
     floor pixels or pick of a ground option refer to each sensor's first frame)."""
+    from optrack.detection.pipeline import PeopleDetector
+    from optrack.detection.preprocessing import OrganisedCloud
+
     detectors: dict[str, PeopleDetector] = {}
     detections: list[dict[str, Any]] = []
     times: list[float] = []

@@ -8,9 +8,25 @@ casting (:mod:`optrack.sim.render`) through a sensor model with real noise
 :class:`optrack.sim.sensor.SimulatedSensor` streams one sensor live.
 """
 
-from optrack.sim.models import MODELS, SensorModel, make_model
-from optrack.sim.scenario import Scenario, ScenarioError, builtin_scenarios, load_scenario
-from optrack.sim.world import SimSensor, Simulation, WorldState
+from optrack.lazy import lazy_exports
+
+# Imported on first use, so that a light module of this package (its cli.py, for
+# `optrack --help`) loads nothing heavy.
+_HOMES = {
+    "MODELS": "optrack.sim.models",
+    "SensorModel": "optrack.sim.models",
+    "make_model": "optrack.sim.models",
+    "Scenario": "optrack.sim.scenario",
+    "ScenarioError": "optrack.sim.scenario",
+    "builtin_scenarios": "optrack.sim.scenario",
+    "load_scenario": "optrack.sim.scenario",
+    "SimSensor": "optrack.sim.world",
+    "Simulation": "optrack.sim.world",
+    "WorldState": "optrack.sim.world",
+}
+
+
+__getattr__ = lazy_exports(__name__, _HOMES)
 
 __all__ = [
     "MODELS",
