@@ -61,3 +61,15 @@ def test_console_script_is_installed_and_answers():
 def test_no_command_prints_usage_and_fails(capsys):
     assert main([]) == 2
     assert "usage: optrack" in capsys.readouterr().err
+
+
+def test_the_parser_loads_no_heavy_library():
+    """`optrack --help` stays fast: declaring every command imports none of the heavy
+    libraries (each package's cli.py imports them only when its command runs)."""
+    heavy = ("open3d", "scipy", "zenoh", "PySide6", "gtsam", "numba", "sklearn")
+    code = (
+        "import sys, optrack.cli as c; c.build_parser(); "
+        f"print(','.join(m for m in {heavy!r} if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "", f"building the parser imported {out.stdout.strip()}"
