@@ -60,6 +60,36 @@ def add_json(parser: argparse.ArgumentParser) -> None:
     )
 
 
+# Each package declares its own commands in its cli.py (``add_commands(commands, command)``),
+# in the order `optrack --help` lists them; a command's handler is
+# ``optrack.<package>.cli:cmd_<command words>``, imported only when the command runs.
+COMMAND_MODULES = (
+    "optrack.sim.cli",
+    "optrack.detection.cli",
+    "optrack.evaluation.cli",
+    "optrack.calibration.cli",
+    "optrack.bench.cli",
+    "optrack.runtime.cli",
+)
+LATE_COMMAND_MODULES = ("optrack.sensors.cli", "optrack.io.cli")
+
+
+def add_command(
+    parent: Any, name: str, help: str, handler: str | Handler
+) -> argparse.ArgumentParser:
+    """A command (or a group's step) with its help and its handler."""
+    sub = parent.add_parser(name, help=help, description=help)
+    sub.set_defaults(handler=handler)
+    return sub
+
+
+def add_group(commands: Any, name: str, help: str, dest: str, metavar: str) -> Any:
+    """A command made of steps (``optrack calibrate STEP``): alone it prints its usage."""
+    group = commands.add_parser(name, help=help, description=help)
+    group.set_defaults(handler=lambda _args: usage(group))
+    return group.add_subparsers(dest=dest, metavar=metavar)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="optrack",
@@ -69,47 +99,24 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"optrack {__version__}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
 
-    from optrack.bench import cli as bench_cli
-    from optrack.calibration import cli as calibration_cli
-    from optrack.detection import cli as detection_cli
-    from optrack.evaluation import cli as evaluation_cli
-    from optrack.io import cli as io_cli
-    from optrack.runtime import cli as runtime_cli
-    from optrack.sensors import cli as sensors_cli
-    from optrack.sim import cli as sim_cli
-
     def command(
-        name: str, help: str, handler: Callable[[argparse.Namespace], int], parent: Any = commands
+        name: str, help: str, handler: str | Handler, parent: Any = commands
     ) -> argparse.ArgumentParser:
-        sub = parent.add_parser(name, help=help, description=help)
-        sub.set_defaults(handler=handler)
-        return sub
+        return add_command(parent, name, help, handler)
 
-    sim_cli.add_commands(commands, command)
-
-    detection_cli.add_commands(commands, command)
-
-    evaluation_cli.add_commands(commands, command)
-
-    calibration_cli.add_commands(commands, command)
-
-    bench_cli.add_commands(commands, command)
-
-    runtime_cli.add_commands(commands, command)
-
-    # commands of the packages above the command line (the application's gui), which
-    # register themselves through the "optrack.commands" entry point group
+    for module in COMMAND_MODULES:
+        importlib.import_module(module).add_commands(commands, command)
+    # the packages above the command line (the application's gui) register their
+    # commands through the "optrack.commands" entry point group
     for entry in entry_points(group="optrack.commands"):
         entry.load()(commands, command)
-
-    sensors_cli.add_commands(commands, command)
-
-    io_cli.add_commands(commands, command)
-
+    for module in LATE_COMMAND_MODULES:
+        importlib.import_module(module).add_commands(commands, command)
     return parser
 
 
-def _usage(parser: argparse.ArgumentParser) -> int:
+def usage(parser: argparse.ArgumentParser) -> int:
+    """Print a command's usage (a group called without its step) and fail."""
     parser.print_help(sys.stderr)
     return EXIT_USAGE
 

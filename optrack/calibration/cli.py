@@ -14,7 +14,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from optrack.cli import CommandError, _usage, add_json, emit_json, info
+from optrack.cli import CommandError, add_group, add_json, emit_json, info
 
 if TYPE_CHECKING:
     import numpy as np
@@ -418,13 +418,13 @@ def cmd_calibrate_export(args: argparse.Namespace) -> int:
 def add_commands(commands: Any, command: Any) -> None:
     """Declare ``optrack calibrate`` and its steps on the ``optrack`` parser (see
     optrack/cli.py); each step's handler is named ``cmd_calibrate_<step>``."""
-    p = commands.add_parser(
+    calibrate = add_group(
+        commands,
         "calibrate",
-        help="Calibrate intrinsics, stereo pairs and the camera network.",
-        description="Calibrate intrinsics, stereo pairs and the camera network.",
+        "Calibrate intrinsics, stereo pairs and the camera network.",
+        "calibrate_command",
+        "STEP",
     )
-    p.set_defaults(handler=lambda a: _usage(p))
-    calibrate = p.add_subparsers(dest="calibrate_command", metavar="STEP")
     _add_image_steps(calibrate, command)
     _add_network_steps(calibrate, command)
     _add_file_steps(calibrate, command)

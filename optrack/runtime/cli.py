@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from optrack.cli import _usage
+from optrack.cli import add_group
 
 __all__ = ["add_commands", "cmd_calibrate_live", "cmd_node_detect", "cmd_node_track", "cmd_run"]
 
@@ -80,13 +80,9 @@ def add_commands(commands: Any, command: Any) -> None:
         "--loop", action="store_true", help="--recording: play it again at its end (else stop)"
     )
 
-    p = commands.add_parser(
-        "node",
-        help="Run one node of a distributed site.",
-        description="Run one node of a distributed site.",
+    node = add_group(
+        commands, "node", "Run one node of a distributed site.", "node_command", "NODE"
     )
-    p.set_defaults(handler=lambda a: _usage(p))
-    node = p.add_subparsers(dest="node_command", metavar="NODE")
     q = command(
         "detect",
         "Detector node: capture one sensor, detect, publish detections.",
