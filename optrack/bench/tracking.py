@@ -51,8 +51,8 @@ from optrack.errors import UserError
 from optrack.evaluation.clear_mot import ClearMot, MotScore
 from optrack.evaluation.replay import replay
 from optrack.evaluation.run import Truth, detect_recording
-from optrack.evaluation.synthetic import SceneTruth, crowd_scene, render
 from optrack.recording import Recording
+from optrack.sim.detections import SceneTruth, crowd_scene, render
 from optrack.tracking.params import TRACKING_PARAMS
 from optrack.tracking.tracker import Tracker
 from optrack.types import DetectionBatch

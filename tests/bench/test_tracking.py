@@ -14,7 +14,7 @@ from optrack.bench.tracking import (
     speed_20x10,
 )
 from optrack.evaluation.clear_mot import MotScore
-from optrack.evaluation.synthetic import crowd_scene, render
+from optrack.sim.detections import crowd_scene, render
 from optrack.tracking.params import TRACKING_PARAMS
 
 

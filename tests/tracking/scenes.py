@@ -8,10 +8,10 @@ import numpy as np
 
 from optrack.evaluation.clear_mot import ClearMot, MotScore
 from optrack.evaluation.replay import replay
-from optrack.evaluation.synthetic import (
+from optrack.sim.detections import (
     Path,
-    Person,
     Scene,
+    ScenePerson,
     SyntheticSensor,
     person_histogram,
     render,
@@ -45,7 +45,7 @@ def run(
     return mot.score(), tracker, result.outputs
 
 
-def ids_of(person: Person, outputs: list, times: np.ndarray, radius: float = 0.5) -> list[int]:
+def ids_of(person: ScenePerson, outputs: list, times: np.ndarray, radius: float = 0.5) -> list[int]:
     """Track ids found within ``radius`` of a person at each instant (in order)."""
     found = []
     for t, out in zip(times, outputs, strict=True):
@@ -62,8 +62,8 @@ def ids_of(person: Person, outputs: list, times: np.ndarray, radius: float = 0.5
 def crossing_scene() -> Scene:
     """Two people crossing diagonally in front of one sensor, 0.7 s apart at the crossing;
     both come from and go out of its view."""
-    a = Person(1, Path((0.0, 9.6), ((1.0, 2.0), (9.0, 8.4))), histogram=RED)
-    b = Person(2, Path((0.7, 10.3), ((1.0, 6.0), (9.0, -0.4))), histogram=BLUE)
+    a = ScenePerson(1, Path((0.0, 9.6), ((1.0, 2.0), (9.0, 8.4))), histogram=RED)
+    b = ScenePerson(2, Path((0.7, 10.3), ((1.0, 6.0), (9.0, -0.4))), histogram=BLUE)
     sensor = SyntheticSensor("cam", 3.5, -1.0, math.pi / 2, max_range=9.0)
     return Scene((a, b), (sensor,), 9.0)
 
@@ -71,18 +71,18 @@ def crossing_scene() -> Scene:
 def pillar_scene() -> Scene:
     """Red walks behind a pillar, waits there 3 s and walks back; meanwhile blue comes in
     on the far side, where red would be had she walked on. Green stands at the back."""
-    red = Person(
+    red = ScenePerson(
         1,
         Path(
             (0.0, 2.5, 5.5, 7.7, 12.0), ((2.5, 3.0), (5.0, 3.0), (5.0, 3.0), (2.8, 3.0), (2.8, 3.0))
         ),
         histogram=RED,
     )
-    blue = Person(
+    blue = ScenePerson(
         2,
         Path((4.0, 5.5, 7.0, 12.0), ((8.0, 3.5), (6.5, 3.5), (6.5, 5.0), (6.5, 5.0))),
         histogram=BLUE,
     )
-    green = Person(3, Path((0.0, 12.0), ((3.0, 6.0), (3.0, 6.0))), histogram=GREEN)
+    green = ScenePerson(3, Path((0.0, 12.0), ((3.0, 6.0), (3.0, 6.0))), histogram=GREEN)
     sensor = SyntheticSensor("cam", 5.0, -1.0, math.pi / 2, max_range=9.0)
     return Scene((red, blue, green), (sensor,), 12.0, pillars=((5.0, 1.5, 0.3),))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from optrack.evaluation.synthetic import render
+from optrack.sim.detections import render
 from optrack.tracking import APPEARANCE_PARAMS
 from optrack.tracking.appearance import (
     AppearanceModel,
@@ -98,15 +98,15 @@ def test_without_appearance_the_person_behind_the_pillar_lends_her_id_to_another
 
 
 def test_a_deleted_identity_is_given_back_to_a_new_track_that_looks_like_it() -> None:
-    from optrack.evaluation.synthetic import Path, Person, Scene, SyntheticSensor
+    from optrack.sim.detections import Path, Scene, ScenePerson, SyntheticSensor
 
     # red leaves the room (out of view) for 10 s, longer than sec_before_old, and returns
-    red = Person(
+    red = ScenePerson(
         1,
         Path((0, 3, 4, 14, 15, 18), ((2, 3), (5, 3), (9, 3), (9, 3), (5, 3), (3, 3))),
         histogram=RED,
     )
-    green = Person(2, Path((0.0, 18.0), ((3.0, 6.0), (6.0, 6.0))), histogram=GREEN)
+    green = ScenePerson(2, Path((0.0, 18.0), ((3.0, 6.0), (6.0, 6.0))), histogram=GREEN)
     sensor = SyntheticSensor("cam", 5.0, -1.0, np.pi / 2, fov_deg=60.0, max_range=9.0)
     scene = Scene((red, green), (sensor,), 18.0, false_alarms_per_frame=0.0)
     _, truth = render(scene, 0)

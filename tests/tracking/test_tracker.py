@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from optrack.evaluation.synthetic import Path, Person, Scene, SyntheticSensor, crowd_scene, render
+from optrack.sim.detections import Path, Scene, ScenePerson, SyntheticSensor, crowd_scene, render
 from optrack.tracking import Tracker, TrackingError
 from optrack.types import Detection, DetectionBatch
 from tests.tracking.scenes import RED, crossing_scene, ids_of, run
@@ -27,7 +27,7 @@ def test_two_people_crossing_keep_their_ids(appearance: str, seed: int) -> None:
 
 
 def _one_person_two_sensors(offset: tuple[float, float], phase: float) -> Scene:
-    person = Person(1, Path((0.0, 8.0), ((1.0, 1.0), (7.0, 4.0))), histogram=RED)
+    person = ScenePerson(1, Path((0.0, 8.0), ((1.0, 1.0), (7.0, 4.0))), histogram=RED)
     sensors = (
         SyntheticSensor("left", -1.0, 2.5, 0.0, max_range=10.0),
         SyntheticSensor("right", 9.0, 2.5, math.pi, max_range=10.0, offset=offset, phase=phase),

@@ -23,7 +23,7 @@ from optrack.types import Detection, DetectionBatch
 
 __all__ = [
     "Path",
-    "Person",
+    "ScenePerson",
     "Scene",
     "SceneTruth",
     "SyntheticSensor",
@@ -56,7 +56,7 @@ class Path:
 
 
 @dataclasses.dataclass(frozen=True)
-class Person:
+class ScenePerson:
     id: int
     path: Path
     height: float = 1.75
@@ -81,7 +81,7 @@ class SyntheticSensor:
 
 @dataclasses.dataclass(frozen=True)
 class Scene:
-    people: tuple[Person, ...]
+    people: tuple[ScenePerson, ...]
     sensors: tuple[SyntheticSensor, ...]
     seconds: float
     pillars: tuple[tuple[float, float, float], ...] = ()  # (x, y, radius)
@@ -152,9 +152,9 @@ def _ray_blocked(
 def _blocker(
     scene: Scene,
     sensor: SyntheticSensor,
-    person: Person,
+    person: ScenePerson,
     xy: tuple[float, float],
-    present: list[tuple[Person, tuple[float, float]]],
+    present: list[tuple[ScenePerson, tuple[float, float]]],
 ) -> tuple[float, tuple[float, ...]]:
     """How far the line of sight from ``sensor`` to ``person`` (at ``xy``) is blocked
     (the deepest overlap of a body or pillar, m; negative: clear) and the colours of the
@@ -178,9 +178,9 @@ def _blocker(
 def _detection(
     scene: Scene,
     sensor: SyntheticSensor,
-    person: Person,
+    person: ScenePerson,
     xy: tuple[float, float],
-    present: list[tuple[Person, tuple[float, float]]],
+    present: list[tuple[ScenePerson, tuple[float, float]]],
     rng: np.random.Generator,
 ) -> Detection | None:
     """The sensor's detection of one person, or None (out of range or view, hidden
@@ -297,10 +297,10 @@ def _truth(scene: Scene) -> SceneTruth:
 def _sees(
     scene: Scene,
     sensor: SyntheticSensor,
-    person: Person,
+    person: ScenePerson,
     px: float,
     py: float,
-    present: list[tuple[Person, tuple[float, float]]],
+    present: list[tuple[ScenePerson, tuple[float, float]]],
 ) -> bool:
     dx, dy = px - sensor.x, py - sensor.y
     d = math.hypot(dx, dy)
@@ -412,7 +412,7 @@ def crowd_scene(
         room = (side, max(5.0, side * 5 / 6))
     paths = _walk_together(rng, people, room, seconds, (0.8, 1.4))
     walkers = tuple(
-        Person(
+        ScenePerson(
             id=i + 1,
             path=path,
             height=float(rng.uniform(1.55, 1.95)),
