@@ -192,11 +192,12 @@ def within_reach(
     return distance <= reach(unseen, max_speed, min_reach)[:, None]
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(slots=True)
 class Candidates:
     """Every (track, detection) pair of one batch, as the cost and the gate see it.
 
-    N tracks, M detections; arrays are indexed [track, detection].
+    N tracks, M detections; arrays are indexed [track, detection]. A cost or a gate
+    reads them and changes none.
     """
 
     t: float  # the batch's stamp

@@ -88,7 +88,7 @@ class TrackerStatus:
     warnings: list[str]
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(slots=True)
 class _Batch:
     """The detections of one batch the tracker uses, with what it derives from them."""
 
@@ -101,7 +101,7 @@ class _Batch:
     features: np.ndarray | None  # (M, K) colour features, appearance on
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(slots=True)
 class _Motion:
     """The UKF's prior and innovation for every (track, detection) pair of a batch."""
 
