@@ -269,9 +269,9 @@ class CalibrationWizard(QWizard):
             if isinstance(page, WizardPage):
                 page.show_error(str(error))
             return
-        self.show(state)
+        self.take_state(state)
 
-    def show(self, state: LiveState) -> None:
+    def take_state(self, state: LiveState) -> None:
         """The backend's snapshot: the wizard's view of the calibration, and the page on
         screen draws it."""
         self.last_state = state

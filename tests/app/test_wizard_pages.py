@@ -191,7 +191,7 @@ def test_refinement_page_plots_trajectories_before_and_after_and_the_error_figur
     )
     # The backend's snapshot after refine(): the wizard takes it, the page draws it.
     refined = state("idle", [], refinement=report, calibration=report.calibration)
-    wizard.show(refined)
+    wizard.take_state(refined)
     page.show_state(refined)
     assert page.report is report
     assert set(page.before.curves) == set(page.after.curves) == {"cam0", "cam1"}
