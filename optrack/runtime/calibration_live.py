@@ -7,7 +7,7 @@ the calibration file) is :class:`optrack.calibration.live_session.LiveSession`;
 this module only talks to the site::
 
     LiveCalibration.start("extrinsics")
-        -> the site's operator, if it has one (a simulated site; Operator), sets the scene
+        -> the site's operator, if it has one (a simulated site; BoardOperator), sets the scene
         -> command "calibration_start" {phase, board} to every detector node
            (optrack/runtime/board_capture.py): each node looks for the board in its depth
            camera's own image a few times per second and publishes a BoardViewMessage on
@@ -50,7 +50,7 @@ from optrack.net.messages import (
     StatusMessage,
 )
 from optrack.params import Params
-from optrack.runtime.calibration_operator import Operator, SiteOperator
+from optrack.runtime.calibration_operator import BoardOperator, SiteOperator
 from optrack.runtime.node import send_command
 from optrack.types import Intrinsics, NetworkCalibration
 
@@ -68,7 +68,7 @@ class LiveCalibration:
     ``bus``: an open :class:`~optrack.net.bus.Bus` of the site (the caller's; it stays
     open). ``sensors``: the detector nodes to use (default: every detector node whose
     status arrives within ``calibration_live.discover_s``). A UserError sentence when
-    none is found. ``operator``: who moves the board (:class:`Operator`; None: the
+    none is found. ``operator``: who moves the board (:class:`BoardOperator`; None: the
     site's people, as on a real site; default: the simulated operator of the site's
     ``site`` node when it answers, ``optrack run`` with simulated sensors).
 
@@ -79,7 +79,7 @@ class LiveCalibration:
     """
 
     sensors: list[str]  # the site's sensors (from their detector nodes' status)
-    operator: Operator | None  # the site's operator (a simulated site) or None
+    operator: BoardOperator | None  # the site's operator (a simulated site) or None
 
     def __init__(
         self,
@@ -89,7 +89,7 @@ class LiveCalibration:
         sensors: Sequence[str] | None = None,
         params: Params | None = None,
         network_params: Params | None = None,
-        operator: Operator | None | str = FIND_OPERATOR,
+        operator: BoardOperator | None | str = FIND_OPERATOR,
     ) -> None:
         self.bus = bus
         self.board = board

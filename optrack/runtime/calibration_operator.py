@@ -1,7 +1,7 @@
 """Who moves the board: the live calibration's view of the site's operator.
 
 The live calibration (:class:`optrack.runtime.calibration_live.LiveCalibration`)
-sees an operator only through :class:`Operator`. A real site has none (None):
+sees an operator only through :class:`BoardOperator`. A real site has none (None):
 its people do what the wizard's pages say. A simulated site has one, the
 simulated operator of its ``site`` node (:mod:`optrack.sim.operator`), reached
 over the bus by :class:`SiteOperator`.
@@ -20,7 +20,7 @@ from optrack.net.bus import Bus
 from optrack.net.messages import StatusMessage
 from optrack.runtime.node import send_command
 
-__all__ = ["OPERATOR_ACTION", "Operator", "SiteOperator"]
+__all__ = ["OPERATOR_ACTION", "BoardOperator", "SiteOperator"]
 
 #: What the simulated operator does in each phase (optrack.sim.operator).
 OPERATOR_ACTION = {
@@ -31,7 +31,7 @@ OPERATOR_ACTION = {
 }
 
 
-class Operator(Protocol):
+class BoardOperator(Protocol):
     """Whoever does on site what a calibration phase needs (show the board to one sensor,
     move it between the sensors, lay it on the floor, walk through every view)."""
 

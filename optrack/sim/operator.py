@@ -22,7 +22,7 @@ board capture, which needs a few per second. The site status says what the
 operator does (``values.operator``, ``operator.scene``, ``operator.error``).
 
 The live calibration sees the operator only through its small interface
-(``optrack.runtime.calibration_operator.Operator``); a real site has none.
+(``optrack.runtime.calibration_operator.BoardOperator``); a real site has none.
 """
 
 from __future__ import annotations
