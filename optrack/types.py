@@ -262,6 +262,9 @@ class DetectionBatch(msgspec.Struct, forbid_unknown_fields=True):
     detections: list[Detection] = []
     ground: tuple[float, float, float, float] | None = None
     processing_ms: float = 0.0
+    # The voxel size the detector down-sampled with (m), the base of the position noise
+    # the tracker gives these detections; 0 when the source does not say.
+    voxel_size: float = 0.0
 
 
 class TrackStatus(enum.StrEnum):

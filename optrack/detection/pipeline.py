@@ -198,6 +198,7 @@ class PeopleDetector:
                 detections=detections,
                 ground=tuple(plane.to_list()) if plane is not None else None,  # type: ignore[arg-type]
                 processing_ms=(time.perf_counter() - started) * 1000.0,
+                voxel_size=float(self.params.voxel_size),
             )
 
         points = self._above_floor(cloud, confidence)

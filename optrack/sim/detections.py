@@ -19,6 +19,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from optrack.tracking.motion import DEFAULT_VOXEL_SIZE
 from optrack.types import Detection, DetectionBatch
 
 __all__ = [
@@ -272,7 +273,13 @@ def render(
             batches.append(
                 (
                     arrival,
-                    DetectionBatch(sensor_id=sensor.id, stamp=t, seq=k, detections=detections),
+                    DetectionBatch(
+                        sensor_id=sensor.id,
+                        stamp=t,
+                        seq=k,
+                        detections=detections,
+                        voxel_size=DEFAULT_VOXEL_SIZE,
+                    ),
                 )
             )
     batches.sort(key=lambda item: (item[0], item[1].stamp, item[1].sensor_id))

@@ -17,12 +17,16 @@ from __future__ import annotations
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints
 
+from optrack.detection.params import DETECTION_PARAMS
 from optrack.params import Params
 
 __all__ = ["DIM_X", "DIM_Z", "ConstantVelocityUKF", "position_variance", "process_noise"]
 
 DIM_X = 4  # [x, y, vx, vy]
 DIM_Z = 4  # [x, y, vx, vy]
+
+# The detector's voxel size, for detections that do not carry theirs (older recordings).
+DEFAULT_VOXEL_SIZE = float(DETECTION_PARAMS["voxel_size"].default)
 
 
 def process_noise(dt: np.ndarray, spectral_density: float) -> np.ndarray:
@@ -43,14 +47,14 @@ def process_noise(dt: np.ndarray, spectral_density: float) -> np.ndarray:
     return Q
 
 
-def position_variance(distance: np.ndarray, params: Params) -> np.ndarray:
+def position_variance(distance: np.ndarray, params: Params, voxel_size: float) -> np.ndarray:
     """Variance (m^2) of a detection's ground position, per axis, at ``distance`` from its sensor.
 
     Voxel quantisation (uniform over a voxel: voxel_size^2 / 12, weighted as
     OpenPTrack's position_variance_weight) plus the sensor's depth error
     (standard deviation k * distance^2, Khoshelham and Elberink 2012).
     """
-    quantisation = params.position_variance_weight * params.voxel_size**2 / 12.0
+    quantisation = params.position_variance_weight * voxel_size**2 / 12.0
     depth_std = params.depth_error_coefficient * np.asarray(distance, dtype=np.float64) ** 2
     return quantisation + depth_std**2
 

@@ -44,17 +44,7 @@ TRACKING_PARAMS = register(
                 max=1000.0,
                 step=1.0,
                 help="Detection position variance in units of the voxel quantisation variance "
-                "voxel_size^2 / 12.",
-            ),
-            Param(
-                "voxel_size",
-                0.06,
-                min=0.005,
-                max=0.5,
-                step=0.005,
-                unit="m",
-                help="Voxel size the detector down-samples with (its quantisation is the base of "
-                "the measurement noise).",
+                "voxel_size^2 / 12 (the detector's voxel_size, which each detection batch carries).",
             ),
             Param(
                 "depth_error_coefficient",

@@ -58,7 +58,7 @@ from optrack.tracking.lifecycle import (
     reference_position,
     seen_near,
 )
-from optrack.tracking.motion import ConstantVelocityUKF, position_variance
+from optrack.tracking.motion import DEFAULT_VOXEL_SIZE, ConstantVelocityUKF, position_variance
 from optrack.tracking.params import APPEARANCE_PARAMS, TRACKING_PARAMS
 from optrack.tracking.recovery import IdentityRecovery
 from optrack.types import Detection, DetectionBatch, Track, TrackBatch
@@ -246,7 +246,9 @@ class Tracker:
             detections=detections,
             positions=np.array([(d.x, d.y) for d in detections], dtype=np.float64).reshape(m, 2),
             confidence=np.array([d.confidence for d in detections], dtype=np.float64),
-            position_var=position_variance(_sensor_distances(detections), p),
+            position_var=position_variance(
+                _sensor_distances(detections), p, batch.voxel_size or DEFAULT_VOXEL_SIZE
+            ),
             features=(
                 self.recovery.features(detections) if self.appearance_enabled and m else None
             ),

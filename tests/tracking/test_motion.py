@@ -82,6 +82,33 @@ def test_sigma_points_are_filterpys() -> None:
 
 def test_position_variance_is_voxel_quantisation_plus_distance_squared_depth_error() -> None:
     params = TRACKING_PARAMS.create()
-    near, far = position_variance(np.array([0.0, 5.0]), params)
+    near, far = position_variance(np.array([0.0, 5.0]), params, 0.06)
     assert near == pytest.approx(30 * 0.06**2 / 12)  # OpenPTrack: weight 30, voxel 6 cm
     assert far == pytest.approx(near + (0.0015 * 25) ** 2)
+    coarse, _ = position_variance(np.array([0.0, 5.0]), params, 0.12)
+    assert coarse == pytest.approx(4 * near)
+
+
+def test_the_detectors_voxel_size_reaches_the_tracker() -> None:
+    """voxel_size has one home, the detector's schema: each batch carries it, and the
+    tracker trusts detections from a coarser voxel grid less."""
+    from optrack.detection.params import DETECTION_PARAMS
+    from optrack.tracking import Tracker
+    from optrack.tracking.motion import DEFAULT_VOXEL_SIZE
+    from optrack.types import Detection, DetectionBatch
+
+    assert "voxel_size" not in TRACKING_PARAMS.defaults()
+    assert DEFAULT_VOXEL_SIZE == DETECTION_PARAMS.defaults()["voxel_size"]
+
+    def settled_variance(voxel_size: float) -> float:
+        tracker = Tracker()
+        for k in range(30):
+            detection = Detection(x=1.0 + 0.03 * k, y=2.0, z=0.9, height=1.7, confidence=2.0)
+            batch = DetectionBatch("s", 0.033 * k, k, detections=[detection], voxel_size=voxel_size)
+            tracker.update(batch)
+        (track,) = tracker.tracks
+        return float(track.P[0, 0])
+
+    fine, unknown, coarse = settled_variance(0.03), settled_variance(0.0), settled_variance(0.2)
+    assert fine < unknown < coarse
+    assert unknown == pytest.approx(settled_variance(DEFAULT_VOXEL_SIZE))
