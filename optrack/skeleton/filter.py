@@ -14,6 +14,7 @@ is the partition's estimate; the next partitions are scored with it fixed
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from optrack.params import Params
@@ -72,23 +73,31 @@ def motion_spread(params: Params, dt: float) -> np.ndarray:
     return spread * dt
 
 
+@numba.njit(cache=True, fastmath=True)
+def _exponent(centred: np.ndarray, target: float) -> float:
+    low, high = -6.0, 8.0  # log10 of beta, found to 14 / 2^16 decades
+    for _ in range(16):
+        mid = 0.5 * (low + high)
+        beta = 10.0**mid
+        total, squares = 0.0, 0.0
+        for value in centred:
+            w = np.exp(beta * value)
+            total += w
+            squares += w * w
+        if total * total / squares > target:
+            low = mid
+        else:
+            high = mid
+    return 10.0**low
+
+
 def annealing_exponent(log_weights: np.ndarray, survival_rate: float) -> float:
     """The exponent beta for which the weights exp(beta * log_weights) keep an effective
     sample size of ``survival_rate`` times the particle count (bisection in log beta)."""
     centred = np.asarray(log_weights, dtype=np.float64) - np.max(log_weights)
     if not np.any(centred < -1e-12):
         return 1.0
-    target = survival_rate * len(centred)
-    low, high = -6.0, 8.0  # log10 of beta
-    for _ in range(40):
-        mid = 0.5 * (low + high)
-        w = np.exp(10.0**mid * centred)
-        ess = w.sum() ** 2 / np.sum(w * w)
-        if ess > target:
-            low = mid
-        else:
-            high = mid
-    return float(10.0**low)
+    return float(_exponent(centred, survival_rate * len(centred)))
 
 
 def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -142,7 +151,7 @@ class SkeletonFilter:
             self.particles + self.rng.normal(size=self.particles.shape) * spread
         )
         for name in PARTITIONS:
-            self.anneal(points, name, int(self.params.layers), spread)
+            self.anneal(points, name, int(self.params.layers), spread, gate=True)
         return self.estimate.copy()
 
     def anneal(
@@ -152,14 +161,18 @@ class SkeletonFilter:
         layers: int,
         spread: np.ndarray,
         parts: np.ndarray | None = None,
+        gate: bool = False,
     ) -> None:
         """Anneal one partition's numbers against ``points`` (N, 3), the partitions before it
         fixed at the estimate; sets its part of the estimate. ``parts`` overrides the parts
-        it is scored on (initialisation scores the torso without the arms, yet unknown)."""
+        it is scored on (initialisation scores the torso without the arms, yet unknown);
+        with ``gate`` a limb is scored only on the points within ``limb_gate`` of where it
+        was or that no part of the estimate explains (tracking), else on all within its
+        reach (initialisation)."""
         p = self.params
         dims = PARTITIONS[partition]
         parts = PARTITION_PARTS[partition] if parts is None else np.asarray(parts)
-        scored, baseline, base = self._scored_points(points, partition)
+        scored, baseline, base = self._scored_points(points, partition, gate)
         shown = len(scored) if partition == "torso" else len(points)
         expected = self.expected_support(shown)[parts]
         idx = np.array(dims)
@@ -176,8 +189,8 @@ class SkeletonFilter:
             self.particles[:, idx] = self.particles[chosen][:, idx]
             if layer < layers - 1:
                 sd = spread[idx] * float(p.anneal_decay) ** (layer + 1)
-                self.particles[:, idx] += self.rng.normal(size=(len(chosen), len(idx))) * sd
-                self.particles = _clamp(self.particles)
+                moved = self.particles[:, idx] + self.rng.normal(size=(len(chosen), len(idx))) * sd
+                self.particles[:, idx] = np.clip(moved, LIMITS[idx, 0], LIMITS[idx, 1])
         if partition == "torso" and _YAW in dims:  # keep yaws next to their mean
             delta = self.particles[:, _YAW] - self.estimate[_YAW]
             self.particles[:, _YAW] = self.estimate[_YAW] + np.angle(np.exp(1j * delta))
@@ -201,7 +214,7 @@ class SkeletonFilter:
             baseline,
         )
 
-    def _scored_points(self, points: np.ndarray, partition: str):
+    def _scored_points(self, points: np.ndarray, partition: str, gate: bool):
         """The points a partition is scored on, their baseline, and the fixed pose's FK."""
         p = self.params
         if partition == "torso":
@@ -218,11 +231,15 @@ class SkeletonFilter:
         baseline, _ = associate(points, geometry, float(p.alpha))
         baseline = baseline[0]
         parts = PARTITION_PARTS[partition]
-        reach = part_reach(self.shape, parts) + float(p.reach_margin)
-        root = base[0][_ROOT_JOINT[partition]]
-        keep = (np.linalg.norm(points - root, axis=1) < reach) & (
-            baseline > float(p.explained_skip)
-        )
+        if gate:  # near where the limb was, or explained by no part of the estimate
+            limb = part_geometry(base[0][None], base[1][None], self.shape, parts)[0]
+            near = _segment_distance(points, limb).min(axis=1) < float(p.limb_gate)
+            body = part_geometry(base[0][None], base[1][None], self.shape)
+            near |= associate(points, body, float(p.alpha))[1][0] < 0
+        else:
+            reach = part_reach(self.shape, parts) + float(p.reach_margin)
+            near = np.linalg.norm(points - base[0][_ROOT_JOINT[partition]], axis=1) < reach
+        keep = near & (baseline > float(p.explained_skip))
         return points[keep], baseline[keep], base
 
     def fit(self, points: np.ndarray, state: np.ndarray | None = None) -> tuple[float, np.ndarray]:
@@ -238,6 +255,14 @@ class SkeletonFilter:
         expected = self.expected_support(len(points))
         support = np.minimum(1.0, counts / np.maximum(expected, 1e-9))
         return float(np.mean(area >= 0)) if len(area) else 0.0, support
+
+
+def _segment_distance(points: np.ndarray, geometry: np.ndarray) -> np.ndarray:
+    """Distance (m) of each point to each part's axis segment, (N, K); geometry (K, G)."""
+    g = np.asarray(geometry, dtype=np.float64)
+    v = points[:, None, :] - g[None, :, 0:3]
+    s = np.clip(np.sum(v * g[None, :, 3:6], axis=2), g[:, 12], g[:, 13])
+    return np.linalg.norm(v - s[..., None] * g[None, :, 3:6], axis=2)
 
 
 def _clamp(state: np.ndarray) -> np.ndarray:

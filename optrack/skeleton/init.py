@@ -28,11 +28,21 @@ from optrack.skeleton.model import (
     rest_state,
 )
 
-__all__ = ["facing_candidates", "height_from_cloud", "initialise", "pose_log_likelihood"]
+__all__ = [
+    "LIMBS",
+    "facing_candidates",
+    "height_from_cloud",
+    "initialise",
+    "pose_log_likelihood",
+]
+
+LIMBS = ("left_arm", "right_arm", "left_leg", "right_leg")
 
 # Spread of the torso's first particles around the guess: metres for the position,
-# radians for the angles (heading, lean, spine and neck).
-_TORSO_SPREAD = np.array([0.06, 0.06, 0.06, 0.35, 0.12, 0.12, 0.2, 0.15, 0.2, 0.2, 0.15, 0.3])
+# radians for the heading and the lean; the spine and neck start straight (a standing
+# person is upright; bent, the chest would reach for the arms' points) and are freed by
+# the finer rounds.
+_TORSO_SPREAD = np.array([0.06, 0.06, 0.06, 0.35, 0.12, 0.12, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 # The heading search's first diffusion for the limbs, radians.
 _LIMB_SPREAD = 0.5
 # The parts the first torso search is scored on: a standing person's legs are near their
@@ -41,6 +51,8 @@ _TORSO_AND_LEGS = np.array(
     [k for k, part in enumerate(PARTS) if part.partition in ("torso", "left_leg", "right_leg")]
 )
 _FINE_ROUNDS = 2
+# The finer rounds diffuse as the motion model does over this time (s).
+_FINE_DT = 0.05
 # Heights (shares of the height) of the feet, and of the shins above them; how far ahead
 # of the shins (m) the feet must reach to tell the heading without trying both.
 _FEET_BAND = (0.05, 0.2)
@@ -105,20 +117,26 @@ def _from_heading(filt: SkeletonFilter, points: np.ndarray, heading: float) -> n
     spread[:12] = _TORSO_SPREAD
     filt.reset(guess, spread)
     filt.anneal(points, "torso", layers, spread, _TORSO_AND_LEGS)
-    for name in ("left_arm", "right_arm", "left_leg", "right_leg"):
-        dims = list(PARTITIONS[name])
-        low, high = LIMITS[dims, 0], LIMITS[dims, 1]
-        filt.particles[:, dims] = filt.rng.uniform(low, high, size=(len(filt.particles), len(dims)))
-        limb_spread = np.zeros(D)
-        limb_spread[dims] = _LIMB_SPREAD
-        filt.anneal(points, name, layers, limb_spread)
+    for name in LIMBS:
+        _search(filt, points, name)
     # The finer rounds: every partition again, from this estimate, as slow frames would.
-    fine = motion_spread(p, float(p.max_dt))
+    fine = motion_spread(p, _FINE_DT)
     for _ in range(_FINE_ROUNDS):
         filt.reset(filt.estimate, fine)
         for name in PARTITIONS:
             filt.anneal(points, name, layers, fine)
     return filt.estimate.copy()
+
+
+def _search(filt: SkeletonFilter, points: np.ndarray, limb: str) -> None:
+    """A limb's coarse search: angles drawn uniformly within its limits, annealed over
+    ``init_layers`` layers against the rest of the estimate."""
+    dims = list(PARTITIONS[limb])
+    low, high = LIMITS[dims, 0], LIMITS[dims, 1]
+    filt.particles[:, dims] = filt.rng.uniform(low, high, size=(len(filt.particles), len(dims)))
+    spread = np.zeros(D)
+    spread[dims] = _LIMB_SPREAD
+    filt.anneal(points, limb, int(filt.params.init_layers), spread)
 
 
 def initialise(filt: SkeletonFilter, points: np.ndarray) -> np.ndarray:

@@ -30,6 +30,7 @@ hip width 0.191 H.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numba
 import numpy as np
@@ -301,6 +302,10 @@ class BodyShape:
 
     def offsets(self) -> np.ndarray:
         """Each point's offset from the point it hangs from, in its frame, (len(POINTS), 3)."""
+        return self._offsets.copy()
+
+    @functools.cached_property
+    def _offsets(self) -> np.ndarray:
         o = {
             "pelvis": (0.0, 0.0, 0.0),
             "spine": (0.0, 0.0, self.lower_trunk),
@@ -416,7 +421,7 @@ def forward_kinematics(
     turned = x[:, angles].astype(np.float32)
     cos_x[:, angles], sin_x[:, angles] = np.cos(turned), np.sin(turned)
     _fk_kernel(
-        x, cos_x, sin_x, shape.offsets(), chosen, rotations, points, _FRAME_PARENT_I, _FRAME_DOF_I,
+        x, cos_x, sin_x, shape._offsets, chosen, rotations, points, _FRAME_PARENT_I, _FRAME_DOF_I,
         _FRAME_AXIS_I, _FRAME_SIGN, _POINT_PARENT_I, _POINT_FRAME_I,
     )  # fmt: skip
     if single:

@@ -111,6 +111,16 @@ SKELETON_PARAMS = register(
                 help="A limb is scored on the points within its length plus this of its root joint.",
             ),
             Param(
+                "limb_gate",
+                0.35,
+                min=0.05,
+                max=3.0,
+                step=0.05,
+                unit="m",
+                help="While tracking, a limb is scored on the points within this distance of "
+                "its axis where it was last found, and those no part explains.",
+            ),
+            Param(
                 "explained_skip",
                 0.1,
                 min=0.0,
@@ -177,7 +187,7 @@ SKELETON_PARAMS = register(
             # ---- initialisation and loss (§IV-D)
             Param(
                 "init_layers",
-                8,
+                12,
                 min=1,
                 max=40,
                 step=1,

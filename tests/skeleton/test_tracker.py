@@ -40,14 +40,14 @@ def test_height_and_heading_from_the_cloud():
     assert sure and abs(gap[0]) < 0.15 and abs(gap[1]) > np.pi - 0.15  # the feet tell front
 
 
-@pytest.mark.parametrize("seed", [2, 3])
+@pytest.mark.parametrize("seed", [1, 2, 3])
 def test_initialisation_finds_a_standing_pose_from_nothing(seed):
     rng = np.random.default_rng(seed)
     truth = standing(rng, rng.uniform(-np.pi, np.pi))
     filt = SkeletonFilter(SHAPE, SKELETON_PARAMS.create(), seed=seed)
     state = initialise(filt, seen_cloud(truth, SHAPE, rng))
     error = joint_errors(state, truth)
-    assert error.mean() < 0.10, error.round(3)
+    assert error.mean() < 0.06, error.round(3)
 
 
 def test_tracker_initialises_tracks_loses_and_starts_again():
@@ -58,7 +58,7 @@ def test_tracker_initialises_tracks_loses_and_starts_again():
     assert states[0] in ("initialising", "tracking") and states[-1] == "tracking"
     estimate = tracker.update(seen_cloud(truth, SHAPE, rng), 4 / 30)
     assert estimate.joints.shape == (len(JOINTS), 3) and estimate.explained > 0.7
-    assert joint_errors(estimate.pose, truth).mean() < 0.08
+    assert joint_errors(estimate.pose, truth).mean() < 0.06
     assert np.all((estimate.confidence > 0) & (estimate.confidence <= 1))
     # The person leaves (no points): a few misses, then lost.
     gone = [tracker.update(np.zeros((0, 3)), (5 + t) / 30).state for t in range(3)]
@@ -74,12 +74,15 @@ def test_tracker_initialises_tracks_loses_and_starts_again():
 
 def test_a_hidden_wrist_gets_a_lower_confidence():
     rng = np.random.default_rng(6)
-    truth = standing(rng, 0.0)
+    truth = rest_state(SHAPE, 0.0, 0.0, 0.4)
+    truth[13], truth[17] = 0.3, 0.3  # arms a little away from the body
     tracker = SkeletonTracker(seed=0, shape=SHAPE)
-    wrist = forward_kinematics(truth, SHAPE)[0][JOINTS.index("left_wrist")]
     for t in range(3):
-        cloud = seen_cloud(truth, SHAPE, rng)
-        estimate = tracker.update(cloud[np.linalg.norm(cloud - wrist, axis=1) > 0.15], t / 30)
+        estimate = tracker.update(seen_cloud(truth, SHAPE, rng), t / 30)
+    assert joint_errors(estimate.pose, truth).max() < 0.1
+    wrist = forward_kinematics(truth, SHAPE)[0][JOINTS.index("left_wrist")]
+    cloud = seen_cloud(truth, SHAPE, rng)
+    estimate = tracker.update(cloud[np.linalg.norm(cloud - wrist, axis=1) > 0.2], 3 / 30)
     confidence = dict(zip(JOINTS, estimate.confidence, strict=True))
     assert confidence["left_wrist"] < 0.5 * confidence["right_wrist"]
 
@@ -87,11 +90,13 @@ def test_a_hidden_wrist_gets_a_lower_confidence():
 def test_shape_estimate_moves_towards_the_persons_own_body():
     rng = np.random.default_rng(7)
     truth_shape = SHAPE.scaled(arms=1.12, limb_radius=1.25)
-    poses = [standing(rng, 0.5)]
+    poses = [standing(rng, 0.5), standing(rng, 2.0)]
     clouds = [seen_cloud(p, truth_shape, rng) for p in poses]
     params = SKELETON_PARAMS.create()
     estimate, _ = estimate_shape(clouds, poses, SHAPE, params)
     arms = estimate.upper_arm / SHAPE.upper_arm
     radius = estimate.radii[3][0] / SHAPE.radii[3][0]
-    assert 1.0 < arms < 1.2  # towards the longer arms (lengths are weakly seen from one pose)
+    assert arms == pytest.approx(1.12, abs=0.03)
     assert abs(radius - 1.25) < abs(1.0 - 1.25) / 2  # more than half way to the thicker limbs
+    assert estimate.thigh / SHAPE.thigh == pytest.approx(1.0, abs=0.05)  # the rest as it was
+    assert estimate.lower_trunk / SHAPE.lower_trunk == pytest.approx(1.0, abs=0.05)
