@@ -330,6 +330,16 @@ def check_scenario(scenario: Scenario) -> None:
     """Raise a :class:`ScenarioError` naming the first field that makes no sense."""
     if not _finite(msgspec.to_builtins(scenario)):
         raise _fail(scenario, "every number must be finite (no .inf or .nan)")
+    _check_venue(scenario)
+    _check_obstacles(scenario)
+    _check_sensors(scenario)
+    _check_people(scenario)
+    if not 0.0 < scenario.seconds <= 3600.0:
+        raise _fail(scenario, f"seconds must be above 0 and at most 3600; got {scenario.seconds}")
+    _check_board(scenario)
+
+
+def _check_venue(scenario: Scenario) -> None:
     venue = scenario.venue
     length, width = venue.size
     if not (1.0 <= length <= 100.0 and 1.0 <= width <= 100.0):
@@ -347,6 +357,11 @@ def check_scenario(scenario: Scenario) -> None:
         span = length if door.wall in ("north", "south") else width
         if door.width <= 0.3 or abs(door.at) + door.width / 2 > span / 2:
             raise _fail(scenario, f"venue.doors[{i}] must be wider than 0.3 m and fit its wall")
+
+
+def _check_obstacles(scenario: Scenario) -> None:
+    venue = scenario.venue
+    length, width = venue.size
     for i, obstacle in enumerate(venue.obstacles):
         where = f"venue.obstacles[{i}] ({type(obstacle).__name__.lower()})"
         points = [obstacle.start, obstacle.to] if isinstance(obstacle, Partition) else [obstacle.at]
@@ -371,6 +386,10 @@ def check_scenario(scenario: Scenario) -> None:
             raise _fail(scenario, f"{where} color must be three numbers 0-1")
         if not 0.0 <= obstacle.texture <= 1.0:
             raise _fail(scenario, f"{where} texture must be 0-1 (relative albedo variation)")
+
+
+def _check_sensors(scenario: Scenario) -> None:
+    venue = scenario.venue
     sensors = scenario.sensors
     if not 1 <= sensors.count <= 16:
         raise _fail(scenario, f"sensors.count must be 1-16; got {sensors.count}")
@@ -385,6 +404,10 @@ def check_scenario(scenario: Scenario) -> None:
             raise _fail(scenario, f"sensors.poses[{i}] must look at a point away from itself")
         if not _inside(scenario, pose.at[:2]) or not 0.0 < pose.at[2] < venue.wall_height:
             raise _fail(scenario, f"sensors.poses[{i}] must be inside the room")
+
+
+def _check_people(scenario: Scenario) -> None:
+    venue = scenario.venue
     people = scenario.people
     low, high = scenario.people_count_range()
     if not 0 <= low <= high <= 100:
@@ -406,8 +429,9 @@ def check_scenario(scenario: Scenario) -> None:
     for i, route in enumerate(people.routes):
         if len(route) < 2 or not all(_inside(scenario, p, 0.2) for p in route):
             raise _fail(scenario, f"people.routes[{i}] needs at least 2 points inside the room")
-    if not 0.0 < scenario.seconds <= 3600.0:
-        raise _fail(scenario, f"seconds must be above 0 and at most 3600; got {scenario.seconds}")
+
+
+def _check_board(scenario: Scenario) -> None:
     board = scenario.board
     if board is not None:
         if not (2 <= board.cols <= 20 and 2 <= board.rows <= 20) or board.cols == board.rows:
