@@ -14,6 +14,7 @@ import abc
 import dataclasses
 import logging
 import math
+import re
 import threading
 import time
 from collections.abc import Iterable, Sequence
@@ -192,12 +193,16 @@ class LiveSensor(Sensor):
     """
 
     backend = "camera"
+    #: sensor ids made from a serial start with this (``openni-1d27...``)
+    id_prefix = "camera"
 
     def __init__(self, target: str, params: Params, sensor_id: str | None = None, uri: str = ""):
         self.target = target
         self.params = params
         self.uri = uri
         self.requested_id = sensor_id
+        self.serial = ""
+        self._id: str | None = None
         self.frames = 0
         self.dropped = 0
         self.reconnects = 0
@@ -223,6 +228,18 @@ class LiveSensor(Sensor):
     def describe(self) -> str:
         """How messages name this sensor."""
         return f"{self.backend} camera '{self.target or 'first attached'}'"
+
+    @property
+    def sensor_id(self) -> str:
+        """The id frames carry: the one asked for, else from the serial (fixed at first open),
+        at most 63 characters."""
+        if self.requested_id:
+            return self.requested_id
+        if self._id is None:
+            name = self.serial or self.target or "camera"
+            slug = re.sub(r"[^A-Za-z0-9_.-]", "-", name).strip("-")
+            return f"{self.id_prefix}-" + slug[: 62 - len(self.id_prefix)]
+        return self._id
 
     # ------------------------------------------------------------ interface
     @property

@@ -30,7 +30,6 @@ import collections
 import ctypes
 import logging
 import math
-import re
 import time
 from typing import Any
 
@@ -120,6 +119,7 @@ class OpenNISensor(LiveSensor):
     """One OpenNI2 camera (see the module docstring)."""
 
     backend = "OpenNI2"
+    id_prefix = "openni"
 
     def __init__(
         self,
@@ -131,7 +131,6 @@ class OpenNISensor(LiveSensor):
         params = params if params is not None else OPENNI_PARAMS.create()
         super().__init__(target, params, sensor_id, uri or f"openni://{target}")
         self.device: Any = None
-        self.serial = ""
         self.model = ""
         self.intrinsics_source = ""
         self.registered = False
@@ -143,21 +142,7 @@ class OpenNISensor(LiveSensor):
         self._color_intrinsics: Intrinsics | None = None
         self._last_index: int | None = None
         self._seq = 0
-        self._id: str | None = None
         self._started_at: float | None = None
-
-    def describe(self) -> str:
-        return f"OpenNI2 camera '{self.target or 'first attached'}'"
-
-    @property
-    def sensor_id(self) -> str:
-        """The id frames carry: the one asked for, else from the serial (fixed at first open)."""
-        if self.requested_id:
-            return self.requested_id
-        if self._id is None:
-            name = self.serial or self.target or "camera"
-            return "openni-" + re.sub(r"[^A-Za-z0-9_.-]", "-", name).strip("-")[:56]
-        return self._id
 
     # ------------------------------------------------------------ device
     def _open_device(self) -> SensorInfo:

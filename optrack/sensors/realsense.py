@@ -15,7 +15,6 @@ and distortion come from the device's calibration.
 from __future__ import annotations
 
 import logging
-import re
 from typing import Any
 
 import numpy as np
@@ -108,6 +107,7 @@ class RealSenseSensor(LiveSensor):
     """One RealSense camera (see the module docstring)."""
 
     backend = "RealSense"
+    id_prefix = "realsense"
 
     def __init__(
         self,
@@ -119,7 +119,6 @@ class RealSenseSensor(LiveSensor):
         params = params if params is not None else REALSENSE_PARAMS.create()
         super().__init__(target, params, sensor_id, uri or f"realsense://{target}")
         import_pyrealsense2()  # fail at once, with the sentence, when it is missing
-        self.serial = ""
         self.model = ""
         self.modes: dict[str, Mode] = {}
         self._pipeline: Any = None
@@ -129,19 +128,6 @@ class RealSenseSensor(LiveSensor):
         self._color_intrinsics: Intrinsics | None = None
         self._last_number: int | None = None
         self._seq = 0
-        self._id: str | None = None
-
-    def describe(self) -> str:
-        return f"RealSense camera '{self.target or 'first attached'}'"
-
-    @property
-    def sensor_id(self) -> str:
-        if self.requested_id:
-            return self.requested_id
-        if self._id is None:
-            name = self.serial or self.target or "camera"
-            return "realsense-" + re.sub(r"[^A-Za-z0-9_.-]", "-", name).strip("-")[:53]
-        return self._id
 
     def _find(self, rs: Any) -> Any:
         devices = list(rs.context().query_devices())
