@@ -18,7 +18,7 @@ import numba
 import numpy as np
 
 from optrack.params import Params
-from optrack.skeleton.likelihood import associate, log_likelihood
+from optrack.skeleton.likelihood import associate, log_likelihood, signed_distance
 from optrack.skeleton.model import (
     FRAMES,
     LIMITS,
@@ -176,6 +176,12 @@ class SkeletonFilter:
         shown = len(scored) if partition == "torso" else len(points)
         expected = self.expected_support(shown)[parts]
         idx = np.array(dims)
+        if base is not None:  # the fixed pose, for every particle, filled once
+            n = len(self.particles)
+            base = (
+                np.broadcast_to(base[0], (n, *base[0].shape)).copy(),
+                np.broadcast_to(base[1], (n, *base[1].shape)).copy(),
+            )
         for layer in range(layers):
             ll = self._score(scored, baseline, base, partition, parts, expected)
             beta = annealing_exponent(ll, float(p.survival_rate))
@@ -186,7 +192,7 @@ class SkeletonFilter:
                 best = np.exp(sharp * (ll - ll.max()))
                 self.estimate[idx] = _weighted_mean(self.particles[:, idx], best / best.sum(), dims)
             chosen = systematic_resample(w, self.rng)
-            self.particles[:, idx] = self.particles[chosen][:, idx]
+            self.particles[:, idx] = self.particles[np.ix_(chosen, idx)]
             if layer < layers - 1:
                 sd = spread[idx] * float(p.anneal_decay) ** (layer + 1)
                 moved = self.particles[:, idx] + self.rng.normal(size=(len(chosen), len(idx))) * sd
@@ -202,7 +208,7 @@ class SkeletonFilter:
         state = np.broadcast_to(self.estimate, self.particles.shape).copy()
         dims = list(PARTITIONS[partition])
         state[:, dims] = self.particles[:, dims]
-        pts, rot = forward_kinematics(state, self.shape, PARTITION_FRAMES[partition], base)
+        pts, rot = forward_kinematics(state, self.shape, PARTITION_FRAMES[partition], out=base)
         geometry = part_geometry(pts, rot, self.shape, parts)
         return log_likelihood(
             scored,
@@ -212,6 +218,7 @@ class SkeletonFilter:
             float(p.alpha),
             float(p.support_weight),
             baseline,
+            int(p.threads),
         )
 
     def _scored_points(self, points: np.ndarray, partition: str, gate: bool):
@@ -227,15 +234,13 @@ class SkeletonFilter:
         fixed = np.array(
             [k for k, part in enumerate(PARTS) if part.partition in list(PARTITIONS)[:done]]
         )
-        geometry = part_geometry(base[0][None], base[1][None], self.shape, fixed)
-        baseline, _ = associate(points, geometry, float(p.alpha))
-        baseline = baseline[0]
+        body = part_geometry(base[0][None], base[1][None], self.shape)
+        distance = np.abs(signed_distance(points, body)[0][0])  # (N, K)
+        baseline = np.minimum(distance[:, fixed].min(axis=1), float(p.alpha))
         parts = PARTITION_PARTS[partition]
         if gate:  # near where the limb was, or explained by no part of the estimate
-            limb = part_geometry(base[0][None], base[1][None], self.shape, parts)[0]
-            near = _segment_distance(points, limb).min(axis=1) < float(p.limb_gate)
-            body = part_geometry(base[0][None], base[1][None], self.shape)
-            near |= associate(points, body, float(p.alpha))[1][0] < 0
+            near = _segment_distance(points, body[0, parts]).min(axis=1) < float(p.limb_gate)
+            near |= distance.min(axis=1) >= float(p.alpha)
         else:
             reach = part_reach(self.shape, parts) + float(p.reach_margin)
             near = np.linalg.norm(points - base[0][_ROOT_JOINT[partition]], axis=1) < reach

@@ -151,10 +151,14 @@ def log_likelihood(
     alpha: float,
     support_weight: float,
     baseline: np.ndarray | None = None,
+    threads: int = 1,
 ) -> np.ndarray:
     """Eq. 9 for each pose, (P,): the fast path (numba, float32 distances).
 
-    Same arguments and result as :func:`log_likelihood_numpy`."""
+    Same arguments and result as :func:`log_likelihood_numpy`; ``threads``: how many
+    CPU threads share the poses (more helps only where cores are idle: a thread that
+    has to wait for a busy core holds every other one up)."""
+    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
     pts = np.asarray(points, dtype=np.float32)
     geometry = np.ascontiguousarray(geometry, dtype=np.float32)
     if geometry.shape[2] != G:

@@ -396,6 +396,7 @@ def forward_kinematics(
     shape: BodyShape,
     frames: tuple[str, ...] = FRAMES,
     base: tuple[np.ndarray, np.ndarray] | None = None,
+    out: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """World positions of :data:`POINTS` and rotations of :data:`FRAMES` for many states.
 
@@ -403,13 +404,17 @@ def forward_kinematics(
     (P, len(FRAMES), 3, 3) (without the leading P for a single state). With
     ``frames`` a subset (a limb's chain) and ``base`` the (points, frames) of one
     full pose, only that subset is recomputed; the rest is copied from ``base``.
+    ``out``: arrays of those shapes to write into instead (what ``frames`` does not
+    turn is left as it is there: a buffer filled with a base once serves many calls).
     """
     single = np.ndim(state) == 1
     x = np.atleast_2d(np.asarray(state, dtype=np.float64))
     n = len(x)
-    if base is None:
-        points = np.zeros((n, len(POINTS), 3))
-        rotations = np.zeros((n, len(FRAMES), 3, 3))
+    if out is not None:
+        points, rotations = out
+    elif base is None:
+        points = np.empty((n, len(POINTS), 3))
+        rotations = np.empty((n, len(FRAMES), 3, 3))
     else:
         points = np.broadcast_to(base[0], (n, len(POINTS), 3)).copy()
         rotations = np.broadcast_to(base[1], (n, len(FRAMES), 3, 3)).copy()
@@ -417,7 +422,7 @@ def forward_kinematics(
     # Sines and cosines of the angles that turn the chosen frames only (float32: numpy's
     # fast path; they place points to well under a micrometre).
     angles = [d for name in frames for d in _FRAME_DOFS[name]]
-    cos_x, sin_x = np.zeros((n, D), np.float32), np.zeros((n, D), np.float32)
+    cos_x, sin_x = np.empty((n, D), np.float32), np.empty((n, D), np.float32)
     turned = x[:, angles].astype(np.float32)
     cos_x[:, angles], sin_x[:, angles] = np.cos(turned), np.sin(turned)
     _fk_kernel(

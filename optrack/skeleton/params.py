@@ -93,6 +93,15 @@ SKELETON_PARAMS = register(
                 "layer's spread.",
             ),
             Param(
+                "threads",
+                1,
+                min=1,
+                max=64,
+                step=1,
+                help="CPU threads the likelihood shares its particles among (more helps only "
+                "where cores are idle).",
+            ),
+            Param(
                 "torso_points",
                 250,
                 min=10,

@@ -1,16 +1,16 @@
 """Timing of the skeleton's hot loop and filter step on synthetic clouds (docs/skeleton.md).
 
-Run: ``.venv/bin/python -m tests.skeleton.measure`` (``NUMBA_NUM_THREADS=1`` for one
-thread). Prints, for 300 and 600 points, the wall and CPU time of one full-body
-likelihood of 2000 poses, and of one filter step with the default parameters.
+Run: ``.venv/bin/python -m tests.skeleton.measure [THREADS]`` (default 1, the
+parameter ``threads``). Prints, for 300 and 600 points, the wall and CPU time of one
+full-body likelihood of 2000 poses, and of one filter step with the default parameters.
 Until ``optrack bench skeleton`` exists, this is the command behind the figures.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 
-import numba
 import numpy as np
 
 from optrack.skeleton.filter import SkeletonFilter
@@ -31,21 +31,24 @@ def _timed(call, repeats: int) -> tuple[list[float], list[float]]:
     return wall, cpu
 
 
-def main() -> None:
+def main(threads: int) -> None:
     shape = BodyShape.from_height(1.75)
     truth = _pose(shape)
     rng = np.random.default_rng(0)
     joints = forward_kinematics(truth, shape)[0][:16]
-    print(f"numba threads: {numba.get_num_threads()}")
+    print(f"threads: {threads}")
     geometry = part_geometry(
         *forward_kinematics(truth + rng.normal(0, 0.05, (2000, D)), shape), shape
     )
     expected = np.full((len(PARTS), 2), 3.0)
     for n in (300, 600):
         points = seen_cloud(truth, shape, rng, points=n)
-        log_likelihood(points, geometry, expected, 0.15, 0.6, 0.5)
+        log_likelihood(points, geometry, expected, 0.15, 0.6, 0.5, threads=threads)
         wall, cpu = _timed(
-            lambda pts=points: log_likelihood(pts, geometry, expected, 0.15, 0.6, 0.5), 20
+            lambda pts=points: log_likelihood(
+                pts, geometry, expected, 0.15, 0.6, 0.5, threads=threads
+            ),
+            20,
         )
         print(
             f"likelihood, 2000 poses x {len(points)} points x 13 parts: wall median "
@@ -53,7 +56,7 @@ def main() -> None:
             f"cpu median {np.median(cpu) * 1e3:.1f} ms"
         )
     for n in (300, 600):
-        filt = SkeletonFilter(shape, SKELETON_PARAMS.create(), seed=0)
+        filt = SkeletonFilter(shape, SKELETON_PARAMS.create({"threads": threads}), seed=0)
         filt.reset(truth)
         clouds = iter([seen_cloud(truth, shape, rng, points=n) for _ in range(12)])
         filt.step(next(clouds), 1 / 30)
@@ -73,4 +76,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 1)
