@@ -32,6 +32,8 @@ __all__ = [
     "NetworkCalibration",
     "RGBDFrame",
     "SensorCalibration",
+    "Skeleton",
+    "SkeletonBatch",
     "Track",
     "TrackBatch",
     "TrackStatus",
@@ -378,3 +380,28 @@ class NetworkCalibration(msgspec.Struct, forbid_unknown_fields=True):
         base["world_T_camera"] = matrix
         sensors[sensor_id] = SensorCalibration(**base)  # type: ignore[arg-type]
         return msgspec.structs.replace(self, sensors=sensors)
+
+
+class Skeleton(msgspec.Struct, forbid_unknown_fields=True):
+    """One tracked person's skeleton (world frame, metres).
+
+    ``id`` is the person's track id; ``state`` is ``initialising``, ``tracking``
+    or ``lost``; ``rate_hz`` how often this skeleton is updated; ``joints`` maps a
+    joint name (optrack/skeleton/joints.py) to ``(x, y, z, confidence)``, confidence
+    in 0..1; a joint with no position (a lost skeleton) is left out.
+    """
+
+    id: int
+    height: float
+    state: str
+    rate_hz: float = 0.0
+    joints: dict[str, tuple[float, float, float, float]] = {}
+
+
+class SkeletonBatch(msgspec.Struct, forbid_unknown_fields=True):
+    """Every current skeleton at one moment (the skeleton node's output)."""
+
+    stamp: float
+    seq: int = 0
+    frame_id: str = "world"
+    skeletons: list[Skeleton] = []

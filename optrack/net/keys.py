@@ -10,6 +10,8 @@
     optrack/<site>/preview/<sensor>      low-rate down-sampled frames for the GUI
     optrack/<site>/clock                 the tracker's clock (a queryable)
     optrack/<site>/board_views/<sensor>  checkerboard views while a calibration capture runs
+    optrack/<site>/person_clouds/<sensor> each person's decimated points (skeletons on)
+    optrack/<site>/skeletons             SkeletonBatch from the skeleton node
 """
 
 from __future__ import annotations
@@ -80,6 +82,16 @@ class SiteKeys:
         capture (:class:`~optrack.net.messages.BoardViewMessage`)."""
         chunk = sensor if sensor == "*" else check_name("sensor", sensor)
         return f"{self.prefix}/board_views/{chunk}"
+
+    def person_clouds(self, sensor: str = "*") -> str:
+        """Where a detector node publishes each person's decimated points while the
+        skeleton stage is on (:class:`~optrack.net.messages.PersonCloudsMessage`)."""
+        chunk = sensor if sensor == "*" else check_name("sensor", sensor)
+        return f"{self.prefix}/person_clouds/{chunk}"
+
+    @property
+    def skeletons(self) -> str:
+        return f"{self.prefix}/skeletons"
 
     def command(self, node: str = "*") -> str:
         """Where a node answers commands (a queryable): start a recording, a calibration

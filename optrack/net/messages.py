@@ -17,6 +17,7 @@ from collections.abc import Iterable
 from typing import Any, TypeVar
 
 import msgspec
+import numpy as np
 
 from optrack.errors import UserError
 from optrack.types import (
@@ -24,6 +25,7 @@ from optrack.types import (
     Intrinsics,
     Matrix4,
     NetworkCalibration,
+    SkeletonBatch,
     TrackBatch,
 )
 
@@ -38,11 +40,15 @@ __all__ = [
     "CommandRequest",
     "DestinationStatus",
     "DetectionsMessage",
+    "MAX_PERSON_POINTS",
     "Message",
     "MessageError",
+    "PersonCloud",
+    "PersonCloudsMessage",
     "ParamValue",
     "ParamsMessage",
     "PreviewMessage",
+    "SkeletonsMessage",
     "StatusMessage",
     "TracksMessage",
     "decode",
@@ -112,6 +118,63 @@ class TracksMessage(Message, tag="tracks"):
         _finite("tracks stamp", (self.batch.stamp,))
         for t in self.batch.tracks:
             _finite("a track", (t.x, t.y, t.height, t.vx, t.vy, t.age, t.confidence))
+
+
+class SkeletonsMessage(Message, tag="skeletons"):
+    """The skeleton node's output at one moment."""
+
+    batch: SkeletonBatch
+
+    def check(self) -> None:
+        _finite("skeletons stamp", (self.batch.stamp,))
+        for skeleton in self.batch.skeletons:
+            _finite("a skeleton", (skeleton.height, skeleton.rate_hz))
+            for joint in skeleton.joints.values():
+                _finite("a skeleton joint", joint)
+
+
+#: The most points one person's cloud may carry on the bus (per sensor and frame).
+MAX_PERSON_POINTS = 4096
+
+
+class PersonCloud(msgspec.Struct, forbid_unknown_fields=True):
+    """One person's decimated points as one sensor saw them.
+
+    ``x, y, height``: the detection (world frame, metres); ``points``: float16
+    x, y, z triples relative to ``(x, y, 0)`` (so float16 keeps millimetres),
+    at most :data:`MAX_PERSON_POINTS`.
+    """
+
+    x: float
+    y: float
+    height: float
+    points: bytes = b""
+
+    def world_points(self) -> np.ndarray:
+        """The points in the world frame, (N, 3) float64."""
+        offsets = np.frombuffer(self.points, dtype=np.float16).reshape(-1, 3)
+        return offsets.astype(np.float64) + np.array([self.x, self.y, 0.0])
+
+
+class PersonCloudsMessage(Message, tag="person_clouds"):
+    """Every person one sensor's detector found in one frame, with their points
+    (published only while the skeleton stage is on); ``stamp`` in tracker time."""
+
+    sensor: str
+    stamp: float
+    clouds: list[PersonCloud] = []
+
+    def check(self) -> None:
+        _finite("person clouds stamp", (self.stamp,))
+        for cloud in self.clouds:
+            _finite("a person cloud", (cloud.x, cloud.y, cloud.height))
+            if len(cloud.points) % 6 or len(cloud.points) // 6 > MAX_PERSON_POINTS:
+                raise ValueError(
+                    f"a person cloud holds {len(cloud.points)} bytes; it must be float16 "
+                    f"x, y, z triples, at most {MAX_PERSON_POINTS} points"
+                )
+            if not np.all(np.isfinite(np.frombuffer(cloud.points, dtype=np.float16))):
+                raise ValueError("a person cloud holds a non-finite point")
 
 
 class CalibrationMessage(Message, tag="calibration"):
