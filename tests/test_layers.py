@@ -16,7 +16,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 # Bottom to top. A package's own ``cli.py`` belongs to the ``cli`` layer.
 LAYERS: list[set[str]] = [
-    {"optrack.types", "optrack.geometry", "optrack.params", "optrack.errors", "optrack.io", "optrack.lazy"},
+    {"optrack.types", "optrack.geometry", "optrack.params", "optrack.errors", "optrack.io", "optrack.lazy", "optrack.resources"},
     {"optrack.recording", "optrack.net"},
     {
         "optrack.sensors",

@@ -69,7 +69,7 @@ def add_commands(commands: Any, command: Any) -> None:
         "Simulate a venue with walking people and write a recording with ground truth.",
         "optrack.sim.cli:cmd_sim",
     )
-    p.add_argument("scenario", help="scenario name or YAML file (resources/scenarios)")
+    p.add_argument("scenario", help="scenario name or YAML file (optrack/resources/scenarios)")
     p.add_argument("--out", required=True, help="output recording directory (must be new)")
     p.add_argument(
         "--seed", type=int, default=0, help="random seed (the same seed gives the same recording)"

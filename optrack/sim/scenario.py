@@ -1,6 +1,6 @@
 """Scenario files: a venue, its sensors, its people and (optionally) a checkerboard.
 
-A scenario is a YAML file; the built-in ones live in ``resources/scenarios``
+A scenario is a YAML file; the built-in ones live in ``optrack/resources/scenarios``
 and are named by their file stem (``crowd``, ``mixed``, ...). A file that
 cannot be read, is not YAML, or holds a wrong field gives a
 :class:`ScenarioError` whose message is one sentence naming the file, the
@@ -44,6 +44,7 @@ import msgspec
 import yaml
 
 from optrack.errors import UserError
+from optrack.resources import scenario_dir
 
 __all__ = [
     "SCENARIO_DIR",
@@ -64,7 +65,7 @@ __all__ = [
     "load_scenario",
 ]
 
-SCENARIO_DIR = Path(__file__).resolve().parents[2] / "resources" / "scenarios"
+SCENARIO_DIR = scenario_dir()  # inside the package (optrack/resources/scenarios)
 SENSOR_MODEL_NAMES = ("kinect2", "kinect1", "sr4500", "stereo")
 
 
@@ -236,7 +237,7 @@ class Scenario(_Spec):
 
 
 def builtin_scenarios() -> list[str]:
-    """Names of the scenarios shipped in resources/scenarios."""
+    """Names of the scenarios shipped in optrack/resources/scenarios."""
     if not SCENARIO_DIR.is_dir():
         return []
     return sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
