@@ -43,14 +43,31 @@ def _info(message: str) -> None:
 
 
 def _config_overrides(path: str | None) -> dict[str, Any]:
-    """The ``detection`` values a YAML config file sets (the whole file is validated)."""
-    from optrack.params import load_config
+    """The ``detection`` values a YAML config file sets (the whole file is validated):
+    parameters for every sensor, and per sensor model under the model's name."""
+    from optrack.detection.params import SENSOR_MODELS, check_config_section
+    from optrack.params import REGISTRY, ParamError, load_config
 
     if not path:
         return {}
-    load_config(path)  # validates every stage, with one clear sentence on error
-    data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
-    return dict(data.get("detection") or {})
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError):
+        data = None
+    section = data.get("detection") if isinstance(data, dict) else None
+    if not isinstance(section, dict) or not set(section) & set(SENSOR_MODELS):
+        load_config(path)  # validates every stage, with one clear sentence on error
+        return dict(section or {})
+    if not set(data) <= set(REGISTRY):
+        load_config(path)  # names the unknown stage
+    try:  # per sensor model values: the other stages as load_config checks them
+        check_config_section(section)
+        for stage, values in data.items():
+            if stage != "detection":
+                REGISTRY[stage].validate(values or {})
+    except ParamError as error:
+        raise ParamError(f"config file {path}: {error}") from None
+    return dict(section)
 
 
 def _params(args: argparse.Namespace, model: str | None) -> Params:
@@ -387,11 +404,13 @@ def add_commands(commands: Any, command: Any) -> None:
     )
     p.add_argument("--preset", choices=("children",), help="parameter preset on top of the model")
     p.add_argument("--sensor", help="recording: only this sensor (default: all)")
-    p.add_argument("--frames", type=int, help="recording or sensor: stop after this many frames")
+    from optrack.io.arguments import count, positive_number
+
+    p.add_argument("--frames", type=count, help="recording or sensor: stop after this many frames")
     p.add_argument("--color", help="depth image: registered colour image of the same size")
     p.add_argument(
         "--depth-scale",
-        type=float,
+        type=positive_number,
         help="depth image: metres per unit (default 0.001: millimetres)",
     )
     add_json(p)

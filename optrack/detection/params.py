@@ -28,6 +28,7 @@ __all__ = [
     "DETECTION_PARAMS",
     "PRESETS",
     "SENSOR_MODELS",
+    "check_config_section",
     "detection_params",
 ]
 
@@ -504,5 +505,33 @@ def detection_params(
             raise ParamError(f"detection has no preset '{preset}' (it has: {', '.join(PRESETS)}).")
         values.update(PRESETS[preset])
     if overrides:
-        values.update(overrides)
+        values.update(_for_model(overrides, model if model in SENSOR_MODELS else "default"))
     return DETECTION_PARAMS.create(values)
+
+
+def _for_model(section: Mapping[str, Any], model: str) -> dict[str, Any]:
+    """A ``detection`` section's values for one sensor model: the parameters it names
+    for every sensor, then those under the model's own name on top."""
+    values = {k: v for k, v in section.items() if k not in SENSOR_MODELS}
+    values.update(section.get(model) or {})
+    return values
+
+
+def check_config_section(section: Mapping[str, Any]) -> None:
+    """Refuse a config file's ``detection`` section that some sensor model cannot take.
+
+    The section names parameters for every sensor and, under a sensor model's name
+    (``kinect1: {max_distance: 8.0}``), parameters for that model's sensors only.
+    """
+    DETECTION_PARAMS.validate({k: v for k, v in section.items() if k not in SENSOR_MODELS})
+    for model in SENSOR_MODELS:
+        values = section.get(model)
+        if values is not None and not isinstance(values, Mapping):
+            raise ParamError(
+                f"detection: '{model}' is a sensor model; give it parameters "
+                f"(e.g. {model}: {{max_distance: 8.0}})."
+            )
+        try:
+            DETECTION_PARAMS.validate(values or {})
+        except ParamError as error:
+            raise ParamError(f"under {model}, {error}") from None

@@ -8,6 +8,10 @@ the ground plane (0.5 m). A person counts in an instant when at least one
 sensor sees at least 20 % of them within its range; people nobody can see
 are "don't care". Scores come overall (all sensors into one tracker) and per
 sensor (that sensor's batches alone, same tracker settings).
+
+Detection runs again on every evaluation (nothing is cached), so a config
+file's ``detection`` section (values for every sensor, and per sensor model
+under the model's name) is scored like its tracking stages.
 """
 
 from __future__ import annotations
@@ -114,6 +118,12 @@ def _config(path: str | None) -> dict[str, Mapping[str, Any]]:
         return {}
     if not isinstance(data, dict) or not all(isinstance(v, dict | None) for v in data.values()):
         raise EvalError(f"config file {file} must map stage names to parameters.")
+    from optrack.detection.params import check_config_section  # registers the stage
+
+    try:
+        check_config_section(data.get("detection") or {})
+    except ParamError as error:
+        raise EvalError(f"config file {file}: {error}") from None
     unknown = sorted(set(data) - set(REGISTRY))
     if unknown:
         raise EvalError(

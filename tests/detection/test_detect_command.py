@@ -77,3 +77,22 @@ def test_depth_image_with_colour_is_detected(shared_data, capsys):
     assert main([*argv, "--ground=0.065,-0.691,-0.720,0.712"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["detections"] == []  # a laptop and a box on the floor: nobody
+
+
+def test_config_file_sets_detection_per_sensor_model(shared_data, tmp_path, capsys):
+    cloud = str(shared_data / "pcl" / "five_people.pcd")
+    config = tmp_path / "strict.yaml"
+
+    def people(section: str, *extra: str) -> int:
+        config.write_text(section)
+        assert main(["detect", cloud, *INTRINSICS, "--config", str(config), *extra, "--json"]) == 0
+        return len(json.loads(capsys.readouterr().out)["detections"])
+
+    strict = "detection:\n  kinect1:\n    min_height: 2.2\n"  # Kinect v1 sensors only
+    assert people(strict) == 5  # a bare .pcd has PCL's settings: not a Kinect v1
+    assert people(strict, "--sensor-model", "kinect1") == 0
+    assert people("detection:\n  min_height: 2.2\n") == 0  # every sensor
+    config.write_text("detection:\n  kinect1:\n    max_distance: 100\n")
+    fails_with_one_sentence(
+        capsys, [cloud, *INTRINSICS, "--config", str(config)], "strict.yaml", "under kinect1"
+    )

@@ -51,3 +51,29 @@ def test_bad_preset_and_bad_value_are_refused():
         detection_params(preset="toddlers")
     with pytest.raises(ParamError, match="voxel_size"):
         detection_params(overrides={"voxel_size": 0.0})
+
+
+def test_a_config_section_sets_values_for_every_sensor_and_per_sensor_model():
+    from optrack.detection.params import check_config_section
+
+    section = {"max_distance": 7.0, "kinect1": {"max_distance": 9.0, "min_confidence": -2.5}}
+    check_config_section(section)
+    kinect1 = detection_params("kinect1", overrides=section)
+    assert (kinect1.max_distance, kinect1.min_confidence) == (9.0, -2.5)
+    kinect2 = detection_params("kinect2", overrides=section)
+    assert (kinect2.max_distance, kinect2.min_confidence) == (7.0, -3.0)
+    assert kinect2.sampling_factor == 2  # the model's own values stay
+    # A camera optrack has no figures for takes the section's "default" values.
+    unknown = detection_params(None, overrides={"default": {"max_distance": 3.0}})
+    assert unknown.max_distance == 3.0
+
+
+def test_a_bad_config_section_is_refused_naming_the_sensor_model():
+    from optrack.detection.params import check_config_section
+
+    with pytest.raises(ParamError, match="max_distanse"):
+        check_config_section({"max_distanse": 7.0})
+    with pytest.raises(ParamError, match="under kinect1"):
+        check_config_section({"kinect1": {"max_distance": -1.0}})
+    with pytest.raises(ParamError, match="'stereo' is a sensor model"):
+        check_config_section({"stereo": 8.0})

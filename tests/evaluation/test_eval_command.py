@@ -98,3 +98,33 @@ def test_eval_takes_settings_from_a_config_file_and_the_command_line(
     assert result["appearance"] is True
     assert result["tracks_started"] == 0  # no detection is that confident
     assert result["fn"] == result["objects"] > 0
+
+
+def test_eval_detects_again_with_the_config_files_detection_values(
+    recording, tmp_path, capsys
+) -> None:
+    config = tmp_path / "detection.yaml"
+    _, default = _eval(capsys, str(recording))
+    # Values for another sensor model leave these Kinect v2 sensors as they were.
+    config.write_text("detection:\n  kinect1:\n    min_height: 2.2\n")
+    code, other_model = _eval(capsys, str(recording), "--config", str(config))
+    assert code == 0
+    for key in ("mota", "idsw", "fp", "fn", "tracks_started"):
+        assert other_model[key] == default[key]
+    # Nobody here is 2.2 m tall: with that as the shortest person, nothing is detected.
+    for section in ("  min_height: 2.2\n", "  kinect2:\n    min_height: 2.2\n"):
+        config.write_text("detection:\n" + section)
+        code, result = _eval(capsys, str(recording), "--config", str(config))
+        assert code == 0
+        assert result["tracks_started"] == 0
+        assert result["fn"] == result["objects"] > 0
+
+
+def test_eval_refuses_bad_detection_values_in_one_sentence(recording, tmp_path, capsys) -> None:
+    config = tmp_path / "bad.yaml"
+    config.write_text("detection:\n  kinect2:\n    max_distanse: 8\n")
+    code = main(["eval", str(recording), "--config", str(config), "--json"])
+    err = capsys.readouterr().err.strip()
+    assert code == 1
+    assert len(err.splitlines()) == 1
+    assert "bad.yaml" in err and "under kinect2" in err and "max_distanse" in err
