@@ -59,24 +59,28 @@ class Intrinsics(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     dist: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
+        # UserError (a ValueError): values come from command lines and files a user wrote
         for name in ("fx", "fy", "cx", "cy"):
             value = getattr(self, name)
             if not math.isfinite(value):
-                raise ValueError(f"intrinsics {name} must be a finite number; got {value}.")
+                raise UserError(f"intrinsics {name} must be a finite number; got {value}.")
         if self.fx <= 0 or self.fy <= 0:
-            raise ValueError(
+            raise UserError(
                 f"intrinsics focal lengths must be positive; got fx={self.fx}, fy={self.fy}."
             )
         if self.width < 0 or self.height < 0:
-            raise ValueError(f"intrinsics image size must be >= 0; got {self.width}x{self.height}.")
+            raise UserError(f"intrinsics image size must be >= 0; got {self.width}x{self.height}.")
+        if not all(math.isfinite(c) for c in self.dist):
+            raise UserError(f"intrinsics dist must be finite numbers; got {list(self.dist)}.")
         if len(self.dist) not in (0, 4, 5, 8):
-            raise ValueError(
+            raise UserError(
                 f"intrinsics dist must hold 0, 4, 5 or 8 OpenCV coefficients; got {len(self.dist)}."
             )
 
     @classmethod
     def parse(cls, text: str, width: int = 0, height: int = 0) -> Intrinsics:
-        """Parse ``"fx,fy,cx,cy"`` as given on the command line."""
+        """Parse ``"fx,fy,cx,cy"`` as given on the command line: four finite numbers, the
+        focal lengths positive."""
         parts = [p for p in text.replace(" ", "").split(",") if p]
         try:
             values = [float(p) for p in parts]
@@ -85,6 +89,11 @@ class Intrinsics(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
         if len(values) != 4:
             raise UserError(
                 f"intrinsics must be four numbers 'fx,fy,cx,cy' (pixels); got '{text}'."
+            )
+        if not all(math.isfinite(v) for v in values) or min(values[:2]) <= 0:
+            raise UserError(
+                f"intrinsics '{text}' must be four finite numbers fx,fy,cx,cy in pixels with "
+                "focal lengths fx and fy above 0 (e.g. 525,525,319.5,239.5)."
             )
         return cls(*values, width=width, height=height)
 
@@ -165,9 +174,10 @@ class RGBDFrame:
             shape = getattr(self.depth, "shape", None)
             raise ValueError(f"frame depth must be an HxW array; got shape {shape}.")
         if self.depth.dtype == np.uint16:
-            if not self.depth_scale > 0:
-                raise ValueError(
-                    f"frame depth_scale must be > 0 metres per unit; got {self.depth_scale}."
+            if not 0 < self.depth_scale < math.inf:
+                raise UserError(
+                    f"depth scale {self.depth_scale} must be a finite number of metres per depth "
+                    "unit above 0 (0.001 for millimetres)."
                 )
         elif self.depth.dtype.kind != "f":
             raise ValueError(

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from optrack.cli import EXIT_OK, CommandError, add_json, emit_json, info
+from optrack.io.arguments import index, positive_number
 
 __all__ = ["add_commands", "cmd_cloud"]
 
@@ -92,12 +93,14 @@ def add_commands(commands: Any, command: Any) -> None:
         help="fx,fy,cx,cy in pixels (required for an image; a recording has its own)",
     )
     p.add_argument(
-        "--depth-scale", type=float, help="metres per depth unit (default 0.001: millimetres)"
+        "--depth-scale",
+        type=positive_number,
+        help="metres per depth unit (default 0.001: millimetres)",
     )
     p.add_argument("--color", help="registered colour image for a depth image (same size)")
     p.add_argument("--sensor", help="recording: sensor id (default: the first)")
     p.add_argument(
-        "--frame", type=int, default=0, help="recording: frame number of that sensor (default 0)"
+        "--frame", type=index, default=0, help="recording: frame number of that sensor (default 0)"
     )
     p.add_argument("--out", required=True, help="output .pcd file")
     add_json(p)

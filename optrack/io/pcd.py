@@ -54,14 +54,20 @@ class PointCloudData:
 
 def read_pcd_header(path: str | os.PathLike[str]) -> dict[str, str]:
     """The header of a PCD file as a mapping of keyword to the rest of its line."""
-    path = Path(path)
+    return _read_header(Path(path))[0]
+
+
+def _read_header(path: Path) -> tuple[dict[str, str], int]:
+    """The header (see :func:`read_pcd_header`) and the offset of the data after it."""
     header: dict[str, str] = {}
+    offset = 0
     try:
         with path.open("rb") as handle:
             for _ in range(64):
-                raw = handle.readline()
+                raw = handle.readline(4096)
                 if not raw:
                     break
+                offset += len(raw)
                 line = raw.decode("ascii", errors="replace").strip()
                 if not line or line.startswith("#"):
                     continue
@@ -80,7 +86,42 @@ def read_pcd_header(path: str | os.PathLike[str]) -> dict[str, str]:
             f"{path} is not a PCD file (its header lacks {', '.join(missing)}); "
             "give a point cloud saved by PCL, Open3D or optrack."
         )
-    return header
+    return header, offset
+
+
+# The most one byte of LZF data can stand for: a back reference of 3 bytes repeats at
+# most 264 bytes.
+LZF_MAX_RATIO = 88
+
+
+def _check_size(path: Path, header: dict[str, str], offset: int, points: int) -> None:
+    """Refuse a header that promises more points than the file's size can hold, before
+    anything is allocated for them (Open3D allocates what the header says)."""
+    try:
+        sizes = [int(v) for v in header.get("SIZE", "").split()]
+        counts = [int(v) for v in header.get("COUNT", "").split()] or [1] * len(sizes)
+    except ValueError:
+        sizes, counts = [], []
+    fields = header["FIELDS"].split()
+    if len(sizes) != len(fields) or len(counts) != len(fields) or min(sizes + counts) < 1:
+        raise PCDError(f"{path} has a malformed SIZE/COUNT in its header (one per field).")
+    record = sum(size * count for size, count in zip(sizes, counts, strict=True))
+    data = path.stat().st_size - offset
+    kind = header["DATA"].lower()
+    if kind == "binary_compressed":
+        with path.open("rb") as handle:
+            handle.seek(offset)
+            lengths = np.frombuffer(handle.read(8).ljust(8, b"\0"), dtype="<u4")
+        packed, unpacked = int(lengths[0]), int(lengths[1])
+        fits = unpacked == points * record and packed <= data - 8
+        fits = fits and unpacked <= packed * LZF_MAX_RATIO
+    else:  # binary: the records; ascii: at least a digit and a separator per value
+        fits = data >= points * (record if kind == "binary" else 2 * sum(counts))
+    if not fits:
+        raise PCDError(
+            f"{path} is damaged: its header promises {points} points but the file holds "
+            f"{data} bytes of {kind} data, too few for them."
+        )
 
 
 def read_pcd(path: str | os.PathLike[str]) -> PointCloudData:
@@ -88,11 +129,15 @@ def read_pcd(path: str | os.PathLike[str]) -> PointCloudData:
     import open3d as o3d
 
     path = Path(path)
-    header = read_pcd_header(path)
+    header, offset = _read_header(path)
     try:
         width, height = int(header["WIDTH"]), int(header["HEIGHT"])
     except ValueError:
-        raise PCDError(f"{path} has a malformed WIDTH/HEIGHT in its header.") from None
+        width = height = -1
+    if width < 0 or height < 0:
+        raise PCDError(
+            f"{path} has a malformed WIDTH/HEIGHT in its header (whole numbers, 0 or more)."
+        )
     fields = tuple(header["FIELDS"].split())
     if not {"x", "y", "z"} <= set(fields):
         raise PCDError(
@@ -104,6 +149,7 @@ def read_pcd(path: str | os.PathLike[str]) -> PointCloudData:
             f"{path} uses DATA {data}; PCD data must be ascii, binary or binary_compressed."
         )
     expected = width * height
+    _check_size(path, header, offset, expected)
     cloud = o3d.t.io.read_point_cloud(
         str(path), remove_nan_points=False, remove_infinite_points=False
     )

@@ -72,3 +72,46 @@ def test_truncated_or_foreign_files_get_one_sentence(tmp_path, shared_data):
         read_pcd(tmp_path / "notes.pcd")
     with pytest.raises(PCDError, match="does not exist"):
         read_pcd(tmp_path / "missing.pcd")
+
+
+@pytest.mark.parametrize("data", ["binary", "ascii", "binary_compressed"])
+def test_a_header_promising_more_points_than_the_file_holds_is_refused_before_reading(
+    tmp_path, data
+):
+    """A header of 200000x200000 points over 1 kB of data: one sentence, nothing allocated
+    (Open3D would allocate what the header says)."""
+    header = (
+        "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+        f"WIDTH 200000\nHEIGHT 200000\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 40000000000\nDATA {data}\n"
+    )
+    body = np.uint32([1000, 4_000_000]).tobytes() if data == "binary_compressed" else b""
+    path = tmp_path / "lie.pcd"
+    path.write_bytes(header.encode() + body + b"\0" * 1000)
+    with pytest.raises(PCDError, match=r"promises 40000000000 points .* too few for them"):
+        read_pcd(path)
+
+
+def test_a_compressed_cloud_claiming_more_than_lzf_can_hold_is_refused(tmp_path):
+    """PCL's sizes agree (1e6 points of 12 bytes) but 1 kB of LZF cannot unpack to 12 MB."""
+    header = (
+        "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1000000\nHEIGHT 1\nDATA binary_compressed\n"
+    )
+    path = tmp_path / "lzf.pcd"
+    path.write_bytes(header.encode() + np.uint32([1000, 12_000_000]).tobytes() + b"\0" * 1000)
+    with pytest.raises(PCDError, match="damaged"):
+        read_pcd(path)
+
+
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [("WIDTH -5", "malformed WIDTH/HEIGHT"), ("SIZE 4 4", "malformed SIZE/COUNT")],
+)
+def test_malformed_header_numbers_get_one_sentence(tmp_path, line, message):
+    lines = {"FIELDS": "x y z", "SIZE": "4 4 4", "TYPE": "F F F", "WIDTH": "3", "HEIGHT": "1"}
+    key, _, value = line.partition(" ")
+    lines[key] = value
+    text = "".join(f"{k} {v}\n" for k, v in lines.items()) + "DATA binary\n"
+    path = tmp_path / "bad.pcd"
+    path.write_bytes(text.encode() + b"\0" * 36)
+    with pytest.raises(PCDError, match=message):
+        read_pcd(path)
