@@ -7,7 +7,10 @@
 Each datagram is one JSON document (no trailing NUL byte): a frame of tracks
 (``frame_id`` "world": id, x, y in metres on the floor, height in metres, age
 in seconds, confidence) or a heartbeat every 0.25 s (``frame_id``
-"heartbeat": the ids alive and the largest id given so far).
+"heartbeat": the ids alive and the largest id given so far) or, while the
+skeleton stage runs (``optrack run --skeleton``), a frame of skeletons
+(``pose_tracks``, OpenPTrack v2's pose message: per person its id, height, state
+and joints by name, each x, y, z in metres and a confidence).
 """
 
 from __future__ import annotations
@@ -37,6 +40,18 @@ def main() -> int:
         stamp = header["stamp"]["sec"] + header["stamp"]["nsec"] * 1e-9
         if header["frame_id"] == "heartbeat":
             print(f"{stamp:.3f} alive {message['alive_IDs']} max {message['max_ID']}", flush=True)
+            continue
+        if "pose_tracks" in message:
+            bodies = ", ".join(
+                f"#{s['id']} {s['state']} head "
+                + (
+                    "({x:+.2f}, {y:+.2f}, {z:.2f})".format(**s["joints"]["HEAD"])
+                    if "HEAD" in s["joints"]
+                    else "unknown"
+                )
+                for s in message["pose_tracks"]
+            )
+            print(f"{stamp:.3f} skeletons {header['seq']}: {bodies or 'nobody'}", flush=True)
             continue
         people = ", ".join(
             f"#{t['id']} ({t['x']:+.2f}, {t['y']:+.2f}) {t['height']:.2f} m"

@@ -1,6 +1,7 @@
 """All outputs of a site: tracks in, UDP JSON / OSC / WebSocket out, plus the heartbeat.
 
-:class:`Outputs` takes each :class:`~optrack.types.TrackBatch` and sends it
+:class:`Outputs` takes each :class:`~optrack.types.TrackBatch` (and, while the
+skeleton stage runs, each :class:`~optrack.types.SkeletonBatch`) and sends it
 to every destination of the ``outputs`` parameters; a thread sends the
 heartbeat every ``heartbeat_s`` whether or not tracks arrive. ``alive_IDs``
 are the ids of the latest batch (none once no batch came for ``stale_s``),
@@ -22,7 +23,7 @@ from optrack.outputs import openptrack_json, osc
 from optrack.outputs.udp import MODES, Destination, UdpSender, parse_address, parse_destinations
 from optrack.outputs.websocket import WebSocketServer
 from optrack.params import Param, Params, Schema, register
-from optrack.types import TrackBatch
+from optrack.types import SkeletonBatch, TrackBatch
 
 __all__ = ["DEFAULT_UDP_PORT", "OUTPUTS_PARAMS", "OUTPUT_KINDS", "OUTPUT_PORTS", "Outputs"]
 
@@ -126,6 +127,7 @@ class Outputs:
         self._lock = threading.RLock()
         self.track_seq = 0
         self.heartbeat_seq = 0
+        self.skeleton_seq = 0
         self.alive_ids: list[int] = []
         self.max_id = 0
         self.last_batch_at: float | None = None
@@ -227,14 +229,30 @@ class Outputs:
             datagrams = openptrack_json.track_datagrams(
                 self.track_seq, batch, int(self.params.max_datagram_bytes)
             )
-            if self._udp is not None:
-                for datagram in datagrams:
-                    self._udp.send(datagram)
-            if self._websocket is not None:
-                for datagram in datagrams:
-                    self._websocket.send(datagram.decode("utf-8"))
+            self._send_json(datagrams)
             if self._osc is not None and self._osc.destinations:
                 self._osc.send(osc.frame_bundle(self.track_seq, batch))
+
+    def _send_json(self, datagrams: list[bytes]) -> None:
+        """JSON documents to every UDP destination and WebSocket client."""
+        if self._udp is not None:
+            for datagram in datagrams:
+                self._udp.send(datagram)
+        if self._websocket is not None:
+            for datagram in datagrams:
+                self._websocket.send(datagram.decode("utf-8"))
+
+    def publish_skeletons(self, batch: SkeletonBatch) -> None:
+        """Send one frame of skeletons to every destination (OpenPTrack v2's pose
+        message over UDP and WebSocket, OSC bundles)."""
+        with self._lock:
+            self.skeleton_seq += 1
+            max_bytes = int(self.params.max_datagram_bytes)
+            datagrams = openptrack_json.skeleton_datagrams(self.skeleton_seq, batch, max_bytes)
+            self._send_json(datagrams)
+            if self._osc is not None and self._osc.destinations:
+                for bundle in osc.skeleton_bundles(self.skeleton_seq, batch, max_bytes):
+                    self._osc.send(bundle)
 
     def heartbeat(self) -> None:
         """Send the heartbeat now."""
@@ -248,10 +266,7 @@ class Outputs:
                     self.heartbeat_seq, now, self.alive_ids, self.max_id
                 )
             )
-            if self._udp is not None:
-                self._udp.send(datagram)
-            if self._websocket is not None:
-                self._websocket.send(datagram.decode("utf-8"))
+            self._send_json([datagram])
             if self._osc is not None and self._osc.destinations:
                 self._osc.send(osc.alive_bundle(self.alive_ids, self.max_id))
 

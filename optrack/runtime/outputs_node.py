@@ -4,7 +4,9 @@ It runs inside the tracker node's process (``optrack node track``, ``optrack
 run``), which hands it every tracks frame directly (:meth:`OutputsNode.send`,
 no bus hop before the datagram), or as its own process taking the tracks
 from the bus (``python -m optrack.runtime.outputs_node --site NAME --config
-FILE``; one more hop, for a computer of its own). Its name on the
+FILE``; one more hop, for a computer of its own). Either way it takes the
+skeletons (``skeletons``, while the skeleton stage runs) from the bus and sends
+them to the same destinations. Its name on the
 bus is ``outputs``: its status lists every destination with what was sent
 and the errors, and parameter updates on ``params/outputs`` (stage
 ``outputs``) add, change or remove destinations while it runs; a
@@ -20,11 +22,11 @@ import time
 from typing import Any
 
 from optrack.net.bus import Bus
-from optrack.net.messages import TracksMessage
+from optrack.net.messages import SkeletonsMessage, TracksMessage
 from optrack.outputs.streams import Outputs
 from optrack.params import Params
 from optrack.runtime.node import Node, RateMeter
-from optrack.types import TrackBatch
+from optrack.types import SkeletonBatch, TrackBatch
 
 __all__ = ["OutputsNode", "main"]
 
@@ -51,8 +53,10 @@ class OutputsNode(Node):
         self._meter = RateMeter()
         self._latency = RateMeter()
         self._last_stamp: float | None = None
+        self.skeleton_frames = 0
         if subscribe:
             bus.subscribe(bus.keys.tracks, TracksMessage, self._on_tracks)
+        bus.subscribe(bus.keys.skeletons, SkeletonsMessage, self._on_skeletons)
         self.state = "running"
 
     def _on_params(self, message: Any, key: str) -> None:
@@ -65,6 +69,14 @@ class OutputsNode(Node):
 
     def _on_tracks(self, message: TracksMessage, key: str) -> None:
         self.send(message.batch)
+
+    def _on_skeletons(self, message: SkeletonsMessage, key: str) -> None:
+        self.send_skeletons(message.batch)
+
+    def send_skeletons(self, batch: SkeletonBatch) -> None:
+        """Send one frame of skeletons to every destination now."""
+        self.outputs.publish_skeletons(batch)
+        self.skeleton_frames += 1
 
     def send(self, batch: TrackBatch) -> None:
         """Send one tracks frame to every destination now."""
@@ -84,6 +96,7 @@ class OutputsNode(Node):
                 "frames": self.outputs.frames,
                 "heartbeats": self.outputs.heartbeat_seq,
                 "max_id": self.outputs.max_id,
+                "skeleton_frames": self.skeleton_frames,
             },
         }
 

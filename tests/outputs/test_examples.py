@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from optrack.outputs import OUTPUTS_PARAMS, Outputs
-from optrack.types import Track, TrackBatch
+from optrack.types import Skeleton, SkeletonBatch, Track, TrackBatch
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -46,3 +46,41 @@ def test_python_udp_receiver_prints_tracks_and_heartbeats(closed_port):
     assert "alive [] max 0" in lines[0]  # the heartbeat sent as the outputs start
     assert lines[1] == "10.000 frame 1: #4 (+1.50, -0.25) 1.80 m"
     assert lines[2] == "10.100 frame 2: nobody"
+
+
+def test_python_udp_receiver_prints_skeletons(closed_port):
+    port = closed_port
+    receiver = subprocess.Popen(
+        [
+            sys.executable,
+            str(EXAMPLES / "python_udp_receiver.py"),
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--count",
+            "2",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert receiver.stdout.readline().startswith("listening on 127.0.0.1")
+        outputs = Outputs(OUTPUTS_PARAMS.create({"udp": f"127.0.0.1:{port}", "heartbeat_s": 60.0}))
+        try:
+            time.sleep(0.1)
+            head = {"head": (1.5, -0.25, 1.62, 0.9)}
+            outputs.publish_skeletons(
+                SkeletonBatch(
+                    stamp=10.0,
+                    skeletons=[Skeleton(id=4, height=1.8, state="tracking", joints=head)],
+                )
+            )
+            out, _ = receiver.communicate(timeout=10)
+        finally:
+            outputs.close()
+    finally:
+        receiver.kill()
+        receiver.wait()
+    lines = out.strip().splitlines()
+    assert lines[1] == "10.000 skeletons 1: #4 tracking head (+1.50, -0.25, 1.62)"
