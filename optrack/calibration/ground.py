@@ -52,7 +52,7 @@ def world_from_points(
         camera_xyz = _camera_point(path, n, point, recording, frames)
         pose = calibration.sensors[sid].pose
         measured.append(pose[:3, :3] @ camera_xyz + pose[:3, 3])
-        known.append(np.asarray(point["world"], dtype=np.float64))
+        known.append(_xyz(path, n, point, "world"))
     transform, rms = _fit_rigid(path, np.asarray(measured), np.asarray(known))
     return transform, rms, len(known)
 
@@ -81,7 +81,7 @@ def _camera_point(
     pixel and the depth the recording measured there (frames read once, kept in
     ``frames``)."""
     if "camera" in point:
-        return np.asarray(point["camera"], dtype=np.float64)
+        return _xyz(path, n, point, "camera")
     if "u" not in point or "v" not in point:
         raise GroundError(f"points file {path}: point {n} needs 'camera' or 'u' and 'v'.")
     sid = str(point["sensor"])
@@ -90,11 +90,13 @@ def _camera_point(
             f"points file {path}: point {n} is a pixel (u, v); give the RECORDING to "
             "read its depth from."
         )
-    key = (sid, int(point.get("frame", 0)))
+    key = (sid, int(_number(path, n, point, "frame", 0, np.inf, default=0)))
     if key not in frames:
         frames[key] = recording.frame(*key)
     frame = frames[key]
-    u, v = float(point["u"]), float(point["v"])
+    height, width = frame.depth.shape
+    u = _number(path, n, point, "u", 0, width - 1)
+    v = _number(path, n, point, "v", 0, height - 1)
     z = frame.depth_m()[int(round(v)), int(round(u))]
     if not np.isfinite(z):
         raise GroundError(
@@ -111,6 +113,44 @@ def _camera_point(
     else:
         x, y = (u - k.cx) / k.fx, (v - k.cy) / k.fy
     return np.array([x * z, y * z, z])
+
+
+def _xyz(path: Path, n: int, point: dict[str, Any], key: str) -> np.ndarray:
+    """Point ``n``'s ``key`` as three finite numbers (metres)."""
+    try:
+        xyz = np.asarray(point[key], dtype=np.float64)
+    except (TypeError, ValueError):
+        xyz = np.zeros(0)
+    if xyz.shape != (3,) or not np.all(np.isfinite(xyz)):
+        raise GroundError(
+            f"points file {path}: point {n}'s {key} must be three finite numbers x, y, z in "
+            f"metres; got {point[key]!r}."
+        )
+    return xyz
+
+
+def _number(
+    path: Path,
+    n: int,
+    point: dict[str, Any],
+    key: str,
+    low: float,
+    high: float,
+    default: Any = None,
+) -> float:
+    """Point ``n``'s ``key``: a number from ``low`` to ``high`` (a pixel of the depth image
+    from 0 to its width or height - 1)."""
+    value = point.get(key, default)
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = np.nan
+    if not low <= number <= high:
+        span = f"from {low:g} to {high:g}" if np.isfinite(high) else f"of {low:g} or more"
+        raise GroundError(
+            f"points file {path}: point {n}'s {key} must be a number {span}; got {value!r}."
+        )
+    return number
 
 
 def _fit_rigid(path: Path, measured: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, float]:
