@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.optrack-installed
 NORFAIR := 2.3.0
 XVFB   := xvfb-run -a -s "-screen 0 1280x1024x24"
 
-.PHONY: setup system-deps run test test-2d test-gl lint bench clean
+.PHONY: setup system-deps run test test-2d test-gl lint bench clean wheel package test-package
 
 setup: system-deps $(STAMP)
 
@@ -32,13 +32,27 @@ lint: setup
 
 # 2D widgets and everything without a display: offscreen Qt.
 test-2d: setup
-	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -m "not opengl"
+	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -m "not opengl and not slow"
 
 # OpenGL (3D) widgets: a real X server (Xvfb) and Qt's xcb platform.
 test-gl: setup
 	QT_QPA_PLATFORM=xcb $(XVFB) $(BIN)/python -m pytest -m opengl
 
 test: lint test-2d test-gl
+
+# The wheel (dist/optrack-<version>-py3-none-any.whl) and the Debian package
+# (dist/optrack_<version>_amd64.deb: /opt/optrack, /usr/bin/optrack, systemd units).
+wheel: setup
+	rm -f dist/optrack-*.whl
+	$(BIN)/python -m pip wheel -q --no-deps -w dist .
+	rm -rf build
+
+package: wheel
+	bash packaging/build-deb.sh
+
+# Builds both, installs the wheel in a fresh venv and the .deb on this machine (as root).
+test-package: setup
+	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -m slow tests/packaging
 
 BENCH ?= e2e
 bench: setup

@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["VENUE_FORMAT", "VenueProgress", "venue_recording"]
+__all__ = ["VENUE_FORMAT", "VenueProgress", "clean_stale_venues", "venue_recording"]
 
 log = logging.getLogger("optrack.runtime.site")
 
@@ -32,6 +32,10 @@ def _cache_root() -> Path:
 #: after ray casting), and so is decoding in the detector nodes, where it counts in every
 #: frame's latency; the files are larger (see docs/runtime.md for the measured figures).
 VENUE_FORMAT = {"color_format": "jpg", "jpeg_quality": 95, "png_compression": 0}
+
+#: A cached venue not used for this long is removed (the next start that needs it renders it
+#: again); so is a rendering's scratch folder this old (its process is gone).
+STALE_AFTER_S = {"venue": 14 * 86400.0, "scratch": 3600.0}
 
 #: ``progress(done, total, frames_per_s)`` while a venue renders.
 VenueProgress = Callable[[int, int, float], None]
@@ -56,7 +60,10 @@ def venue_recording(
     name = f"{Path(scenario).stem}-seed{seed}-{seconds:g}s-v{__version__}-png{level}"
     path = (cache or _cache_root()) / name
     done = path / ".complete"
+    if path.parent.is_dir():
+        clean_stale_venues(path.parent, suffix=f"-v{__version__}-png{level}")
     if done.is_file() and is_recording(path):
+        os.utime(done)  # last use: what clean_stale_venues keeps
         return path
     sim = Simulation(scenario, seed=seed, seconds=seconds)
     total = sum(sim.frame_count(k) for k in range(len(sim.sensors)))
@@ -96,3 +103,26 @@ def venue_recording(
         total / max(time.perf_counter() - started, 1e-9),
     )
     return path
+
+
+def clean_stale_venues(root: Path, suffix: str, now: float | None = None) -> list[Path]:
+    """Remove from ``root`` the venues another optrack version or format rendered (their
+    name does not end in ``suffix``), those unused for ``STALE_AFTER_S["venue"]``, and
+    the scratch folders of renderings that stopped; returns what was removed."""
+    now = time.time() if now is None else now
+    removed = []
+    for entry in root.iterdir():
+        if not entry.is_dir():
+            continue
+        if entry.name.startswith("."):
+            stale = now - entry.stat().st_mtime > STALE_AFTER_S["scratch"]
+        else:
+            done = entry / ".complete"
+            used = done.stat().st_mtime if done.is_file() else entry.stat().st_mtime
+            stale = not entry.name.endswith(suffix) or now - used > STALE_AFTER_S["venue"]
+        if stale:
+            shutil.rmtree(entry, ignore_errors=True)
+            removed.append(entry)
+    if removed:
+        log.info("removed %d stale venue(s) from %s", len(removed), root)
+    return removed
