@@ -26,6 +26,7 @@ __all__ = [
     "join_destinations",
     "parse_address",
     "parse_destinations",
+    "resolve_destination",
     "split_destinations",
 ]
 
@@ -81,6 +82,21 @@ def parse_destinations(text: str, default_port: int, what: str) -> list[tuple[st
     return [parse_address(item, default_port, what) for item in split_destinations(text)]
 
 
+def resolve_destination(kind: str, host: str, port: int) -> tuple[int, tuple]:
+    """The address family and socket address of a ``kind`` destination (one sentence when
+    the host is unknown)."""
+    address = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
+    except (socket.gaierror, UnicodeError):
+        raise OutputError(
+            f"{kind} destination {address}: the host '{host}' is unknown; give an IP "
+            "address or a name this computer can resolve."
+        ) from None
+    family, _, _, _, sockaddr = infos[0]
+    return family, sockaddr
+
+
 class Destination:
     """One socket, and what happened to the datagrams sent through it."""
 
@@ -99,14 +115,7 @@ class Destination:
         self.errors = 0
         self.last_error = ""
         self._logged: set[int] = set()
-        try:
-            infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
-        except socket.gaierror:
-            raise OutputError(
-                f"{kind} destination {self.address}: the host '{host}' is unknown; give an IP "
-                "address or a name this computer can resolve."
-            ) from None
-        family, _, _, _, sockaddr = infos[0]
+        family, sockaddr = resolve_destination(kind, host, port)
         ip = ipaddress.ip_address(sockaddr[0])
         if mode == "multicast" and not ip.is_multicast:
             raise OutputError(

@@ -34,10 +34,15 @@ def cmd_node_track(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     """``optrack run [--headless] [--seconds S] [--udp HOST:PORT] [--config FILE]
     [--recording PATH [--speed S] [--loop]]``."""
+    from optrack.outputs.streams import DEFAULT_UDP_PORT
+    from optrack.outputs.udp import parse_destinations, resolve_destination
     from optrack.runtime.config import load_node_config
     from optrack.runtime.process import setup_logging
     from optrack.runtime.site import Site
 
+    for text in args.udp or ():  # refused here, not by a tracker node restarting in a loop
+        for host, port in parse_destinations(text, DEFAULT_UDP_PORT, "--udp destination"):
+            resolve_destination("--udp", host, port)
     config = load_node_config(args.config)
     setup_logging("optrack run")
     site = Site(
@@ -48,6 +53,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         recording=getattr(args, "recording", None),
         speed=getattr(args, "speed", 1.0),
         loop=getattr(args, "loop", False),
+        skeleton=getattr(args, "skeleton", False),
     )
     return site.run()
 
@@ -78,6 +84,11 @@ def add_commands(commands: Any, command: Any) -> None:
     )
     p.add_argument(
         "--loop", action="store_true", help="--recording: play it again at its end (else stop)"
+    )
+    p.add_argument(
+        "--skeleton",
+        action="store_true",
+        help="track skeletons too (skeleton_live.enabled; a skeleton node is started)",
     )
 
     node = add_group(

@@ -100,3 +100,23 @@ def test_a_config_file_with_a_bad_value_is_refused_before_anything_starts(capsys
     code, err = run(capsys, "node", "track", "--site", "x", "--config", path)
     assert code == 1
     assert "outputs.heartbeat_s must be between" in err
+
+
+@pytest.mark.parametrize(
+    ("udp", "sentence"),
+    [
+        ("127.0.0.1:abc", "--udp destination '127.0.0.1:abc' has a bad port 'abc'"),
+        ("127.0.0.1:99999", "--udp destination '127.0.0.1:99999' has a bad port '99999'"),
+        ("127.0.0.1:5000,:0", "--udp destination ':0' has a bad port '0'"),
+        ("nosuch.invalid:5000", "the host 'nosuch.invalid' is unknown"),
+    ],
+)
+def test_run_refuses_a_udp_destination_where_it_is_parsed(capsys, tmp_path, udp, sentence):
+    """``--udp 127.0.0.1:abc`` once printed the destination, left the tracker node
+    restarting in a loop, sent nothing and exited 0."""
+    path = config(tmp_path, bus={"local_port": free_port()})
+    code, err = run(capsys, "run", "--headless", "--seconds", "1", "--udp", udp, "--config", path)
+    assert code == 1
+    assert sentence in err
+    assert ("unknown" in sentence) != ("a port between 1 and 65535" in err)
+    assert "Traceback" not in err and err.count("\n") == 1
