@@ -1,0 +1,305 @@
+"""One person's cloud from every sensor at one instant: the skeleton's input.
+
+Each sensor's depth frame becomes world points (:func:`world_points`: the
+geometry's backprojection, then the sensor's ``world_T_camera``), only in the
+image rectangle where the person's cylinder (below) can appear
+(:func:`person_roi`), without the pixels on depth edges (:func:`drop_edges`:
+flying pixels, which sit in mid-air between a silhouette and what is behind
+it); the frames
+fused at an instant are each sensor's nearest within half its frame period
+(:func:`nearest_frames`). A person's points are those in a vertical cylinder
+around their floor position (:func:`crop_person`): within ``radius`` of
+(x, y) on the floor, above ``floor_margin`` (the floor itself) and below
+their height plus ``head_margin``; a point nearer (on the floor) to another
+person's position than to theirs is left to that person. The cloud is then
+decimated (:func:`decimate`): one point per occupied ``voxel`` (the mean of
+its points, which evens out near and far sensors' densities), then a random
+subset of at most ``points``. :func:`person_cloud` does it all from frames.
+
+The crop is geometric: walls or furniture within ``radius`` of a person are
+kept; in the runtime the detector's segmentation removes them first.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import msgspec
+import numpy as np
+
+from optrack.geometry import backproject_points, invert, project, transform_points
+from optrack.params import Param, Params, Schema, register
+from optrack.types import Intrinsics, RGBDFrame
+
+__all__ = [
+    "FUSION_PARAMS",
+    "crop_person",
+    "decimate",
+    "drop_edges",
+    "fuse_person",
+    "nearest_frames",
+    "person_cloud",
+    "person_mask",
+    "person_roi",
+    "world_points",
+]
+
+FUSION_PARAMS = register(
+    Schema(
+        "skeleton_fusion",
+        [
+            Param(
+                "radius",
+                0.9,
+                min=0.2,
+                max=3.0,
+                step=0.05,
+                unit="m",
+                help="A person's points lie within this distance of their floor position.",
+            ),
+            Param(
+                "floor_margin",
+                0.04,
+                min=0.0,
+                max=0.5,
+                step=0.01,
+                unit="m",
+                help="Points lower than this are the floor, not the person.",
+            ),
+            Param(
+                "head_margin",
+                0.25,
+                min=0.0,
+                max=1.0,
+                step=0.05,
+                unit="m",
+                help="Points higher than the person's height plus this are not theirs.",
+            ),
+            Param(
+                "edge_jump",
+                0.1,
+                min=0.0,
+                max=2.0,
+                step=0.01,
+                unit="m",
+                help="A depth pixel that differs by more than this from a neighbour (or has an "
+                "invalid one) is dropped: flying pixels between a silhouette and the "
+                "background; 0 keeps every pixel.",
+            ),
+            Param(
+                "voxel",
+                0.02,
+                min=0.0,
+                max=0.2,
+                step=0.005,
+                unit="m",
+                help="Decimation grid: one point (the mean) per occupied voxel; 0 keeps every "
+                "point.",
+            ),
+            Param(
+                "points",
+                500,
+                min=10,
+                max=100000,
+                step=10,
+                help="At most this many points per person (a random subset of the voxels').",
+            ),
+            Param(
+                "stride",
+                1,
+                min=1,
+                max=8,
+                step=1,
+                help="Depth pixels taken every this many rows and columns.",
+            ),
+        ],
+        help="How each person's points are gathered from every sensor for the skeleton.",
+    )
+)
+
+
+ROI_MARGIN_PX = 4  # pixels added around a projected cylinder (distortion, rounding)
+
+Roi = tuple[int, int, int, int]  # u0, v0, u1, v1: columns u0..u1-1, rows v0..v1-1
+
+
+def drop_edges(depth_m: np.ndarray, jump: float) -> np.ndarray:
+    """The depth image (metres) with 0 wherever a 4-neighbour differs by more than
+    ``jump`` or is invalid (0 or NaN)."""
+    depth = np.asarray(depth_m, dtype=np.float32)
+    bad = ~(depth > 0)
+    with np.errstate(invalid="ignore"):
+        rows = ~(np.abs(depth[1:] - depth[:-1]) <= jump)
+        cols = ~(np.abs(depth[:, 1:] - depth[:, :-1]) <= jump)
+    bad[1:] |= rows
+    bad[:-1] |= rows
+    bad[:, 1:] |= cols
+    bad[:, :-1] |= cols
+    return np.where(bad, np.float32(0.0), depth)
+
+
+def world_points(
+    frame: RGBDFrame,
+    world_T_camera: np.ndarray,
+    stride: int = 1,
+    roi: Roi | None = None,
+    edge_jump: float = 0.0,
+) -> np.ndarray:
+    """The frame's valid depth pixels (within ``roi``, default the whole image; without
+    edges, :func:`drop_edges`, when ``edge_jump`` > 0) as world points (N, 3) float32."""
+    depth = frame.depth
+    intrinsics = frame.intrinsics
+    if roi is not None:
+        u0, v0, u1, v1 = roi
+        depth = depth[v0:v1, u0:u1]
+        intrinsics = msgspec.structs.replace(
+            intrinsics,
+            cx=intrinsics.cx - u0,
+            cy=intrinsics.cy - v0,
+            width=u1 - u0,
+            height=v1 - v0,
+        )
+    if depth.dtype == np.uint16:
+        depth = depth * np.float32(frame.depth_scale)  # 0 (invalid) stays 0
+    if edge_jump > 0.0:
+        depth = drop_edges(depth, edge_jump)
+    points, _ = backproject_points(depth, intrinsics, stride)
+    return transform_points(world_T_camera, points)
+
+
+def person_roi(
+    intrinsics: Intrinsics,
+    shape: tuple[int, int],
+    world_T_camera: np.ndarray,
+    xy: Sequence[float],
+    height: float,
+    params: Params,
+) -> Roi | None:
+    """The image rectangle (of an image ``shape`` (rows, columns)) holding the person's
+    cylinder: the projection of its bounding box, the whole image when the box reaches
+    behind the camera, None when it falls outside the image."""
+    rows, cols = shape
+    r = float(params.radius)
+    corners = np.array(
+        [
+            (float(xy[0]) + sx * r, float(xy[1]) + sy * r, z)
+            for sx in (-1, 1)
+            for sy in (-1, 1)
+            for z in (float(params.floor_margin), float(height) + float(params.head_margin))
+        ]
+    )
+    camera = transform_points(invert(world_T_camera), corners)
+    if np.any(camera[:, 2] <= 0.05):
+        return 0, 0, cols, rows
+    pixels, _ = project(camera, intrinsics)
+    u0, v0 = np.floor(pixels.min(axis=0)).astype(int) - ROI_MARGIN_PX
+    u1, v1 = np.ceil(pixels.max(axis=0)).astype(int) + ROI_MARGIN_PX + 1
+    u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, cols), min(v1, rows)
+    return (int(u0), int(v0), int(u1), int(v1)) if u1 > u0 and v1 > v0 else None
+
+
+def nearest_frames(
+    stamps: Mapping[str, np.ndarray], t: float, periods: Mapping[str, float]
+) -> dict[str, int]:
+    """For each sensor, the index of its frame stamped nearest ``t`` (its stamps ascending),
+    if within half its frame period; sensors with none that near are left out."""
+    chosen: dict[str, int] = {}
+    for sid, times in stamps.items():
+        times = np.asarray(times, dtype=np.float64)
+        if not len(times):
+            continue
+        i = int(np.searchsorted(times, t))
+        candidates = [k for k in (i - 1, i) if 0 <= k < len(times)]
+        best = min(candidates, key=lambda k: abs(times[k] - t))
+        if abs(times[best] - t) <= 0.5 * periods[sid]:
+            chosen[sid] = best
+    return chosen
+
+
+def person_mask(
+    points: np.ndarray,
+    xy: Sequence[float],
+    height: float,
+    params: Params,
+    others: np.ndarray | Sequence[Sequence[float]] = (),
+) -> np.ndarray:
+    """Which of the points (N, 3) lie in the person's vertical cylinder (see the module
+    docstring); ``others``: the other people's floor positions (M, 2)."""
+    points = np.asarray(points).reshape(-1, 3)
+    dx = points[:, 0] - float(xy[0])
+    dy = points[:, 1] - float(xy[1])
+    near2 = dx * dx + dy * dy
+    z = points[:, 2]
+    mask = (
+        (near2 <= float(params.radius) ** 2)
+        & (z >= float(params.floor_margin))
+        & (z <= float(height) + float(params.head_margin))
+    )
+    for ox, oy in np.asarray(others, dtype=np.float64).reshape(-1, 2):
+        ex = points[:, 0] - ox
+        ey = points[:, 1] - oy
+        mask &= near2 <= ex * ex + ey * ey
+    return mask
+
+
+def crop_person(
+    points: np.ndarray,
+    xy: Sequence[float],
+    height: float,
+    params: Params,
+    others: np.ndarray | Sequence[Sequence[float]] = (),
+) -> np.ndarray:
+    """The points (N, 3) in the person's cylinder (:func:`person_mask`)."""
+    points = np.asarray(points).reshape(-1, 3)
+    return points[person_mask(points, xy, height, params, others)]
+
+
+def decimate(points: np.ndarray, voxel: float, count: int, rng: np.random.Generator) -> np.ndarray:
+    """The mean point of each occupied ``voxel`` (0: every point), then at most ``count`` of
+    them at random (float64)."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if voxel > 0.0 and len(points):
+        cells = np.floor(points / voxel).astype(np.int64)
+        cells -= cells.min(axis=0)
+        span = cells.max(axis=0) + 1
+        keys = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
+        _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+        sums = [np.bincount(inverse, points[:, k], len(counts)) for k in range(3)]
+        points = np.stack(sums, axis=1) / counts[:, None]
+    if len(points) > count:
+        points = points[rng.choice(len(points), count, replace=False)]
+    return points
+
+
+def fuse_person(
+    clouds: Sequence[np.ndarray],
+    xy: Sequence[float],
+    height: float,
+    params: Params,
+    rng: np.random.Generator,
+    others: np.ndarray | Sequence[Sequence[float]] = (),
+) -> np.ndarray:
+    """One person's decimated cloud (K, 3) from every sensor's world points ``clouds``."""
+    parts = [crop_person(cloud, xy, height, params, others) for cloud in clouds]
+    merged = np.concatenate(parts) if parts else np.empty((0, 3))
+    return decimate(merged, float(params.voxel), int(params.points), rng)
+
+
+def person_cloud(
+    frames: Mapping[str, RGBDFrame],
+    poses: Mapping[str, np.ndarray],
+    xy: Sequence[float],
+    height: float,
+    params: Params,
+    rng: np.random.Generator,
+    others: np.ndarray | Sequence[Sequence[float]] = (),
+) -> np.ndarray:
+    """One person's decimated cloud (K, 3) from each sensor's frame at one instant
+    (``poses``: each sensor's ``world_T_camera``), backprojecting only their rectangle."""
+    clouds = []
+    for sid, frame in frames.items():
+        roi = person_roi(frame.intrinsics, frame.shape, poses[sid], xy, height, params)
+        if roi is not None:
+            stride, jump = int(params.stride), float(params.edge_jump)
+            clouds.append(world_points(frame, poses[sid], stride, roi, jump))
+    return fuse_person(clouds, xy, height, params, rng, others)
