@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import heapq
+import logging
 import os
 from collections.abc import Iterable, Iterator
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import cv2
 import msgspec
@@ -30,6 +31,8 @@ from optrack.types import RGBDFrame
 
 __all__ = ["Recording", "is_recording"]
 
+log = logging.getLogger("optrack.recording")
+
 
 def is_recording(path: str | os.PathLike[str]) -> bool:
     """True when ``path`` is a directory holding a recording manifest."""
@@ -37,8 +40,10 @@ def is_recording(path: str | os.PathLike[str]) -> bool:
 
 
 def _read_jsonl(path: Path, kind: type[msgspec.Struct]) -> Iterator[msgspec.Struct]:
-    """Lines of an append-only JSONL file; a last line cut short by a killed writer is skipped."""
+    """Lines of an append-only JSONL file, each with a time ``t`` that never goes back (as
+    the writer checks); a last line cut short by a killed writer is skipped."""
     decoder = msgspec.json.Decoder(kind)
+    last = -float("inf")
     with path.open("rb") as handle:
         number = 0
         for raw in handle:
@@ -48,9 +53,16 @@ def _read_jsonl(path: Path, kind: type[msgspec.Struct]) -> Iterator[msgspec.Stru
             if not raw.strip():
                 continue
             try:
-                yield decoder.decode(raw)
+                item = decoder.decode(raw)
             except msgspec.DecodeError as error:
                 raise RecordingError(f"{path} line {number} is damaged ({error}).") from None
+            if item.t < last:  # type: ignore[attr-defined]
+                raise RecordingError(
+                    f"{path} line {number} is damaged: its time t={item.t:.6f} s goes back "  # type: ignore[attr-defined]
+                    f"from t={last:.6f} s on the line before (a recording is in time order)."
+                )
+            last = item.t  # type: ignore[attr-defined]
+            yield item
 
 
 class Recording:
@@ -91,6 +103,7 @@ class Recording:
         except msgspec.ValidationError as error:
             raise RecordingError(f"{manifest_path} is damaged ({error}).") from None
         self.sensors: dict[str, SensorInfo] = {s.id: s for s in self.manifest.sensors}
+        self._told: set[str] = set()  # the parts already said to be partial
 
     # ------------------------------------------------------------------ index
     @property
@@ -109,9 +122,10 @@ class Recording:
         """The index entries of one sensor, in time order."""
         self._sensor(sensor_id)
         path = self.path / SENSORS_DIR / sensor_id / INDEX
-        if not path.is_file():
-            return iter(())
-        return _read_jsonl(path, IndexEntry)  # type: ignore[return-value]
+        frames = self.manifest.extra.get("frames")
+        announced = frames.get(sensor_id) if isinstance(frames, dict) else None
+        entries = _read_jsonl(path, IndexEntry) if path.is_file() else iter(())
+        return self._counted(entries, f"sensor '{sensor_id}'", "frames", announced)  # type: ignore[arg-type]
 
     def count(self, sensor_id: str) -> int:
         return sum(1 for _ in self.index(sensor_id))
@@ -123,9 +137,34 @@ class Recording:
     def ground_truth(self) -> Iterator[GroundTruth]:
         """Ground truth instants in time order (empty when the recording has none)."""
         path = self.path / GROUND_TRUTH
-        if not path.is_file():
+        if not path.is_file() and not self.manifest.ground_truth:
             return iter(())
-        return _read_jsonl(path, GroundTruth)  # type: ignore[return-value]
+        announced = self.manifest.extra.get("ground_truth_instants")
+        instants = _read_jsonl(path, GroundTruth) if path.is_file() else iter(())
+        return self._counted(instants, "the ground truth", "instants", announced)  # type: ignore[arg-type]
+
+    def _counted(
+        self, items: Iterator[msgspec.Struct], part: str, unit: str, announced: object
+    ) -> Iterator[msgspec.Struct]:
+        """``items`` as they come; once they end short of the count the manifest announces,
+        one sentence (once per part) says how much is missing."""
+        count = 0
+        for item in items:
+            count += 1
+            yield item
+        if isinstance(announced, int) and 0 <= count < announced and part not in self._told:
+            self._told.add(part)
+            log.warning(
+                "recording %s is partial: %s holds %d of the %d %s its manifest announces "
+                "(%d missing, %.0f%%); only what is there is used.",
+                self.path,
+                part,
+                count,
+                announced,
+                unit,
+                announced - count,
+                100.0 * (announced - count) / announced,
+            )
 
     # ----------------------------------------------------------------- frames
     def load(
@@ -141,6 +180,12 @@ class Recording:
             if relative is None or (kind != "depth" and kind not in streams):
                 images[kind] = None
                 continue
+            if PurePosixPath(relative).is_absolute() or ".." in PurePosixPath(relative).parts:
+                raise RecordingError(
+                    f"recording {self.path} is damaged: sensor '{sensor_id}' frame {entry.seq} "
+                    f"names {kind} image '{relative}', outside the sensor's folder; index "
+                    "entries name files inside it (e.g. depth/00000000.png)."
+                )
             file = root / relative
             image = cv2.imread(str(file), cv2.IMREAD_UNCHANGED)
             if image is None:

@@ -125,6 +125,7 @@ class RecordingWriter:
         self._streams = {info.id: _SensorStream(self.path, info) for info in sensors}
         self._truth = (self.path / GROUND_TRUTH).open("ab") if ground_truth else None
         self._truth_t = -float("inf")
+        self._truth_count = 0
         self._closed = False
 
     # -------------------------------------------------------------- public
@@ -186,6 +187,7 @@ class RecordingWriter:
         self._truth.write(_encoder.encode(truth) + b"\n")
         self._truth.flush()
         self._truth_t = truth.t
+        self._truth_count += 1
 
     def close(self) -> None:
         if self._closed:
@@ -199,6 +201,8 @@ class RecordingWriter:
             os.fsync(handle.fileno())
             handle.close()
         self._manifest.extra["frames"] = self.frame_counts
+        if self._truth is not None:
+            self._manifest.extra["ground_truth_instants"] = self._truth_count
         if self._join:
             self._merge_manifest(new=False)
         else:
