@@ -30,6 +30,7 @@ __all__ = [
     "DetectionBatch",
     "Intrinsics",
     "NetworkCalibration",
+    "SITE_REACH_M",
     "RGBDFrame",
     "SensorCalibration",
     "Skeleton",
@@ -37,6 +38,7 @@ __all__ = [
     "Track",
     "TrackBatch",
     "TrackStatus",
+    "pose_problem",
 ]
 
 
@@ -325,16 +327,33 @@ def as_matrix4(pose: np.ndarray) -> Matrix4:
     return tuple(tuple(float(v) for v in row) for row in rows)  # type: ignore[return-value]
 
 
-def _check_rigid(name: str, matrix: np.ndarray, tolerance: float = 1e-4) -> None:
+# No camera of a site is further than this from its world's origin (m).
+SITE_REACH_M = 1000.0
+
+
+def pose_problem(matrix: np.ndarray, tolerance: float = 1e-4) -> str | None:
+    """What keeps a 4x4 matrix from being a camera's pose in a site, to follow its name
+    in a sentence (None when nothing does): not finite, not a rotation and a translation,
+    or a translation beyond :data:`SITE_REACH_M`."""
     if matrix.shape != (4, 4) or not np.all(np.isfinite(matrix)):
-        raise ValueError(f"{name} must be a finite 4x4 matrix.")
+        return "must be a finite 4x4 matrix"
     rotation = matrix[:3, :3]
     if (
         not np.allclose(matrix[3], (0.0, 0.0, 0.0, 1.0), atol=tolerance)
         or not np.allclose(rotation @ rotation.T, np.eye(3), atol=tolerance)
         or np.linalg.det(rotation) < 0
     ):
-        raise ValueError(f"{name} is not a rigid transform (rotation and translation).")
+        return "is not a rigid transform (a rotation and a translation)"
+    distance = math.hypot(*matrix[:3, 3].tolist())  # no overflow near the largest floats
+    if distance > SITE_REACH_M:
+        return f"moves {distance:.4g} m, beyond the {SITE_REACH_M:g} m a site spans"
+    return None
+
+
+def _check_rigid(name: str, matrix: np.ndarray, tolerance: float = 1e-4) -> None:
+    problem = pose_problem(matrix, tolerance)
+    if problem is not None:
+        raise ValueError(f"{name} {problem}.")
 
 
 class SensorCalibration(msgspec.Struct, forbid_unknown_fields=True):

@@ -36,6 +36,30 @@ def test_intrinsics_reject_non_positive_focal_length_and_odd_distortion():
         Intrinsics(525, 525, 320, 240, dist=(0.1, 0.2, 0.3))
 
 
+@pytest.mark.parametrize(
+    "text", ["0,0,32,24", "nan,nan,32,24", "inf,525,32,24", "-300,-300,32,24", "525,525,nan,0"]
+)
+def test_intrinsics_parse_names_the_value_and_the_range(text):
+    with pytest.raises(UserError) as error:
+        Intrinsics.parse(text, 64, 48)
+    assert str(error.value) == (
+        f"intrinsics '{text}' must be four finite numbers fx,fy,cx,cy in pixels with focal "
+        "lengths fx and fy above 0 (e.g. 525,525,319.5,239.5)."
+    )
+
+
+def test_intrinsics_and_depth_scales_a_user_gave_are_user_errors():
+    """A user's value (command line, file) fails with one sentence, not a traceback."""
+    with pytest.raises(UserError, match="intrinsics fx must be a finite number; got nan"):
+        Intrinsics(float("nan"), 525, 320, 240)
+    with pytest.raises(UserError, match="dist must be finite"):
+        Intrinsics(525, 525, 320, 240, dist=(0.1, float("inf"), 0.0, 0.0))
+    depth = np.zeros((2, 2), np.uint16)
+    for scale in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(UserError, match=f"depth scale {scale} must be a finite number"):
+            RGBDFrame(depth, Intrinsics(1, 1, 0, 0), depth_scale=scale)
+
+
 def test_intrinsics_scaled_keeps_pixel_centres():
     half = K.scaled(0.5)
     assert (half.width, half.height) == (320, 240)
@@ -122,5 +146,9 @@ def test_network_calibration_holds_rigid_poses_only():
         calibration.with_pose("cam1", sheared)
     with pytest.raises(UserError, match="no sensor 'cam9'.*cam0"):
         calibration.pose("cam9")
+    far = np.eye(4)
+    far[:3, 3] = [1e308, 0.0, 0.0]
+    with pytest.raises(ValueError, match="moves 1e[+]308 m, beyond the 1000 m a site spans"):
+        calibration.with_pose("cam1", far)
     text = msgspec.json.encode(calibration)
     assert msgspec.json.decode(text, type=NetworkCalibration) == calibration

@@ -43,7 +43,14 @@ import yaml
 from optrack.errors import UserError
 from optrack.geometry import invert, pose_to_quaternion
 from optrack.io.files import atomic_write_bytes, atomic_write_text
-from optrack.types import Intrinsics, Matrix4, NetworkCalibration, SensorCalibration, as_matrix4
+from optrack.types import (
+    Intrinsics,
+    Matrix4,
+    NetworkCalibration,
+    SensorCalibration,
+    as_matrix4,
+    pose_problem,
+)
 
 if TYPE_CHECKING:
     from optrack.calibration.session import SessionResult
@@ -253,36 +260,55 @@ def now_iso() -> str:
 # ---------------------------------------------------------------- validation
 
 
-def _check_rigid(matrix: object, what: str, path: Path) -> None:
-    pose = np.asarray(matrix, dtype=np.float64)
-    rotation = pose[:3, :3]
-    if (
-        pose.shape != (4, 4)
-        or not np.all(np.isfinite(pose))
-        or not np.allclose(pose[3], (0.0, 0.0, 0.0, 1.0), atol=1e-6)
-        or not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-4)
-        or np.linalg.det(rotation) < 0
-    ):
-        raise CalibrationFileError(
-            f"calibration file {path}: {what} is not a rigid transform (a rotation and a "
-            "translation); recalibrate, or restore the .bak file."
-        )
+# how a check's sentence starts and ends: for a file read, and for one about to be written
+_READ = "calibration file {path}", "recalibrate, or restore the .bak file"
+_WRITE = "the calibration for {path}", "nothing was written; check what it was made from"
 
 
-def _validate(calibration: CalibrationFile, path: Path) -> None:
+def _check_rigid(matrix: object, what: str, where: str, fix: str) -> None:
+    problem = pose_problem(np.asarray(matrix, dtype=np.float64))
+    if problem is not None:
+        raise CalibrationFileError(f"{where}: {what} {problem}; {fix}.")
+
+
+def _validate(calibration: CalibrationFile, path: Path, wording: tuple[str, str] = _READ) -> None:
+    """Refuse what no site has: no sensors, a pose that is not a camera's (not finite, not
+    rigid, beyond 1 km), an image of no size, a world that is none of the sensors, a
+    ground without a unit normal, a board of no size."""
+    where, fix = wording[0].format(path=path), wording[1]
     if not calibration.sensors:
-        raise CalibrationFileError(
-            f"calibration file {path} lists no sensors; calibrate the network first."
-        )
+        raise CalibrationFileError(f"{where} lists no sensors; calibrate the network first.")
     for sid, entry in calibration.sensors.items():
-        _check_rigid(entry.world_T_camera, f"sensor '{sid}' world_T_camera", path)
+        _check_rigid(entry.world_T_camera, f"sensor '{sid}' world_T_camera", where, fix)
         if entry.refinement is not None:
-            _check_rigid(entry.refinement, f"sensor '{sid}' refinement", path)
+            _check_rigid(entry.refinement, f"sensor '{sid}' refinement", where, fix)
+        k = entry.intrinsics
+        if k is not None and (k.width < 1 or k.height < 1):
+            raise CalibrationFileError(
+                f"{where}: sensor '{sid}' intrinsics are for an image of {k.width}x{k.height} "
+                f"pixels; width and height must be 1 or more; {fix}."
+            )
+    world = calibration.world
+    camera = world.removeprefix("camera:")
+    if world not in ("floor", "points") and (camera == world or camera not in calibration.sensors):
+        raise CalibrationFileError(
+            f"{where}: world '{world}' must be floor, points or camera:<id> of one of its "
+            f"sensors ({', '.join(sorted(calibration.sensors))}); {fix}."
+        )
     normal = np.asarray(calibration.ground[:3], dtype=np.float64)
     if not np.all(np.isfinite(calibration.ground)) or not 0.99 < np.linalg.norm(normal) < 1.01:
         raise CalibrationFileError(
-            f"calibration file {path}: ground must be a plane a,b,c,d with a unit normal; got "
+            f"{where}: ground must be a plane a,b,c,d with a unit normal; got "
             f"{list(calibration.ground)}."
+        )
+    board = calibration.board
+    if board is not None and not (
+        min(board.cols, board.rows) >= 2 and 0 < board.square < 10 and 0 <= board.thickness < 1
+    ):
+        raise CalibrationFileError(
+            f"{where}: board {board.cols}x{board.rows} of {board.square} m squares, "
+            f"{board.thickness} m thick, is no checkerboard (at least 2x2 inner corners, squares "
+            f"above 0 and below 10 m, a thickness from 0 to below 1 m); {fix}."
         )
 
 
@@ -340,7 +366,7 @@ def save_calibration(path: str | os.PathLike[str], calibration: CalibrationFile)
     Returns the backup's path, or None when there was no previous file.
     """
     path = Path(path)
-    _validate(calibration, path)
+    _validate(calibration, path, _WRITE)
     if path.is_dir():
         raise CalibrationFileError(
             f"--out {path} is a directory; give a file name such as network.yaml."

@@ -109,6 +109,42 @@ def _write(tmp_path, mutate) -> object:
             "damaged",
         ),
         (lambda d: d.update(ground=[0, 0, 2, 0]), "unit normal"),
+        # issue 20: non-finite or absurd values
+        (
+            lambda d: d["sensors"]["cam0"]["world_T_camera"][0].__setitem__(3, 1e308),
+            "world_T_camera moves 1e[+]308 m, beyond the 1000 m a site spans",
+        ),
+        (
+            lambda d: d["sensors"]["cam0"]["world_T_camera"][2].__setitem__(3, -1500.0),
+            "world_T_camera moves 1500 m, beyond the 1000 m",
+        ),
+        (
+            lambda d: d["sensors"]["cam0"]["world_T_camera"][1].__setitem__(3, float("nan")),
+            "world_T_camera must be a finite 4x4 matrix",
+        ),
+        (
+            lambda d: d.update(world="camera:nosuch"),
+            r"world 'camera:nosuch' must be floor, points or camera:<id> of one of its sensors "
+            r"\(cam0\)",
+        ),
+        (lambda d: d.update(world="ceiling"), "world 'ceiling' must be floor, points"),
+        (
+            lambda d: d["sensors"]["cam0"].update(
+                intrinsics={"fx": 500, "fy": 500, "cx": 319.5, "cy": 239.5, "width": 0}
+            ),
+            "intrinsics are for an image of 0x0 pixels; width and height must be 1 or more",
+        ),
+        (
+            lambda d: d["sensors"]["cam0"].update(
+                intrinsics={"fx": float("inf"), "fy": 500, "cx": 319.5, "cy": 239.5}
+            ),
+            "intrinsics fx must be a finite number",
+        ),
+        (lambda d: d.update(ground=[0, 0, float("nan"), 0]), "unit normal"),
+        (
+            lambda d: d.update(board={"cols": 9, "rows": 6, "square": float("nan")}),
+            "is no checkerboard",
+        ),
     ],
 )
 def test_a_bad_file_is_refused_in_one_sentence(tmp_path, mutate, words):
@@ -175,3 +211,18 @@ def test_export_cli_writes_the_chosen_format(tmp_path, calibration, capsys):
     )
     assert code == 1
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_a_calibration_that_no_site_has_is_not_written(tmp_path, calibration):
+    """Saving says what is wrong with the calibration being written, not with a file to
+    restore (issue 20: a NaN from ``calibrate ground --points`` blamed the .bak file)."""
+    far = _pose(0)
+    far[:3, 3] = (2000.0, 0.0, 0.0)
+    path = tmp_path / "network.yaml"
+    with pytest.raises(CalibrationFileError) as error:
+        save_calibration(path, calibration.with_poses({"cam0": far}))
+    assert str(error.value) == (
+        f"the calibration for {path}: sensor 'cam0' world_T_camera moves 2000 m, beyond the "
+        "1000 m a site spans; nothing was written; check what it was made from."
+    )
+    assert not path.exists()
