@@ -14,6 +14,13 @@ def cmd_eval(args: argparse.Namespace) -> int:
     """Score a recording with CLEAR MOT (:func:`optrack.evaluation.run.evaluate`)."""
     from optrack.evaluation.run import evaluate
 
+    skeleton = None
+    if getattr(args, "skeleton", False):
+        from optrack.evaluation.skeleton import evaluate_skeleton
+
+        skeleton = evaluate_skeleton(
+            args.recording, args.calibration, args.config, progress=not args.json
+        )
     result, overall = evaluate(
         args.recording,
         calibration=args.calibration,
@@ -21,6 +28,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         appearance=getattr(args, "appearance", None),
         progress=not args.json,
     )
+    if skeleton is not None:
+        result["skeleton"] = skeleton
     if args.json:
         emit_json(result)
     else:
@@ -31,6 +40,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
         )
         for sid, s in result["sensors"].items():
             info(f"  {sid}: MOTA {s['mota']:.3f}, {s['idsw']} ID switches")
+        if skeleton is not None:
+            info(
+                f"  skeleton: mean marker error {skeleton['mean_error_m']} m, "
+                f"{skeleton['pct_under_0_20']} % under 0.2 m, {skeleton['lost_pct']} % lost, "
+                f"{skeleton['fps']} person-frames/s"
+            )
     return EXIT_OK
 
 
@@ -48,5 +63,10 @@ def add_commands(commands: Any, command: Any) -> None:
         "--appearance",
         choices=("auto", "on", "off"),
         help="appearance recovery of identities (default: the config's, auto: on for one sensor)",
+    )
+    p.add_argument(
+        "--skeleton",
+        action="store_true",
+        help="also track each person's skeleton and score it against the joint truth",
     )
     add_json(p)
