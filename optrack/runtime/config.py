@@ -3,7 +3,8 @@
 The same file format as :func:`optrack.params.load_config` (one mapping per
 stage), read with every stage a node may run registered: ``bus``, ``clock``,
 ``node``, ``site``, ``outputs``, ``detection``, ``tracking``, ``appearance``,
-``smoothing``, ``playback``, ``openni``, ``realsense``, ``usb``, ``recording``. :class:`NodeConfig` also keeps
+``smoothing``, ``playback``, ``openni``, ``realsense``, ``usb``, ``recording``, ``skeleton_live``,
+``skeleton``, ``skeleton_fusion``. :class:`NodeConfig` also keeps
 which values the file set explicitly, so that a detector node lays them
 over its sensor model's defaults.
 """
@@ -124,10 +125,13 @@ def register_node_stages() -> None:
     import optrack.outputs.streams  # noqa: F401
     import optrack.recording.format  # noqa: F401
     import optrack.runtime.site_params  # noqa: F401
+    import optrack.runtime.skeleton_node  # noqa: F401
     import optrack.sensors.openni  # noqa: F401
     import optrack.sensors.playback  # noqa: F401
     import optrack.sensors.realsense  # noqa: F401
     import optrack.sensors.usb  # noqa: F401
+    import optrack.skeleton.fusion  # noqa: F401
+    import optrack.skeleton.params  # noqa: F401
     import optrack.tracking.params  # noqa: F401
 
 

@@ -38,6 +38,7 @@ from optrack.runtime.node import Node, RateMeter
 from optrack.runtime.node_recording import NodePlayback, NodeRecorder
 from optrack.runtime.preview import make_preview
 from optrack.runtime.replay import LiveReplay
+from optrack.runtime.skeleton_node import SkeletonClouds
 from optrack.sensors.base import Sensor
 from optrack.types import DetectionBatch, NetworkCalibration, RGBDFrame
 
@@ -110,7 +111,10 @@ class DetectorNode(Node):
         store: CalibrationStore,
         factory: DetectorFactory = people_detector,
         logger: logging.Logger = log,
+        skeleton: dict[str, Params] | None = None,
     ) -> None:
+        """``skeleton``: the stages ``skeleton_live`` and ``skeleton_fusion`` (the
+        skeleton stage's switch and each person's crop; defaults: off)."""
         self.sensor = sensor
         self.info = sensor.info
         self.detection = detection
@@ -145,6 +149,8 @@ class DetectorNode(Node):
         # its switch is made (and the simulator loaded) when it first asks.
         self.scene: SceneSwitch | None = None
         self.add_command("sim_scene", self._sim_scene)
+        # The skeleton stage: each person's points after each frame, while it is on.
+        self.skeleton = SkeletonClouds(bus, self.info.id, self.live, skeleton)
         # Recording and playback commands (optrack.runtime.node_recording).
         self.recorder = NodeRecorder(self, self.info)
         self.playback = NodePlayback(self, sensor) if isinstance(sensor, LiveReplay) else None
@@ -285,6 +291,7 @@ class DetectorNode(Node):
                 clock_uncertainty_s=estimate.uncertainty_s if estimate is not None else None,
             ),
         )
+        self.skeleton.offer(frame, batch, self.world_T_camera)
         self.frames += 1
         self.detections = len(batch.detections)
         self.state = "running"

@@ -202,6 +202,7 @@ def run_detector_node(sensor_uri: str, site: str, config_path: str | None = None
             config["node"],
             sync,
             CalibrationStore(state_dir(config, site) / name),
+            skeleton={stage: config[stage] for stage in ("skeleton_live", "skeleton_fusion")},
         )
         node.ask_calibration()
         logging.getLogger("optrack.runtime").info(

@@ -78,6 +78,7 @@ class Child:
             "detector": f"detector node '{self.name}'",
             "tracker": "tracker node",
             "outputs": "outputs node",
+            "skeleton": "skeleton node",
             "gui": "operator application",
         }[self.role]
 
@@ -111,10 +112,16 @@ class Site:
         recording: str | None = None,
         speed: float = 1.0,
         loop: bool = False,
+        skeleton: bool = False,
     ) -> None:
         """``recording``: play it through the pipeline instead of ``site.sensors`` (one
         detector node per sensor, started paused and resumed together; ``speed`` times
-        the recorded pace; ``loop`` plays it again at its end, else the site stops there)."""
+        the recorded pace; ``loop`` plays it again at its end, else the site stops there).
+        ``skeleton``: turn the skeleton stage on (``skeleton_live.enabled``: the
+        detectors publish people's points, a skeleton node is started)."""
+        if skeleton:
+            config["skeleton_live"].update({"enabled": True})
+            config.explicit.setdefault("skeleton_live", {})["enabled"] = True
         self.config = config
         self.params: Params = config["site"]
         self.name = check_name("site", str(self.params.name))
@@ -235,6 +242,9 @@ class Site:
                 ["node", "track", "--site", self.name, "--config", str(configs["tracker"])],
             )
         )
+        if self.config["skeleton_live"].enabled:
+            args = ["--site", self.name, "--config", str(configs["tracker"])]
+            children.append(Child("skeleton", "skeleton", "optrack.runtime.skeleton_node", args))
         if not self.headless:
             problem = display_problem()
             if problem is None:
@@ -301,7 +311,7 @@ class Site:
         self.children = self._children(uris, configs)
         if self.playback is None:
             self._attach_operator(uris)
-        order = ("tracker", "detector", "gui")  # the clock first
+        order = ("tracker", "detector", "skeleton", "gui")  # the clock first
         for role in order:
             for child in self.children:
                 if child.role == role:
@@ -435,6 +445,10 @@ class Site:
                 f"tracker {tracker.fps:.0f} Hz {tracker.latency_ms:.0f} ms, "
                 f"{tracker.values.get('tracks', 0)} tracks"
             )
+        skeleton = statuses.get("skeleton")
+        if skeleton is not None:
+            count = skeleton.values.get("skeletons", 0)
+            parts.append(f"skeleton {skeleton.fps:.0f} Hz, {count} skeletons")
         outputs = statuses.get("outputs")
         if outputs is not None:
             for d in outputs.destinations:
