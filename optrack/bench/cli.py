@@ -21,6 +21,7 @@ __all__ = [
     "cmd_bench_detection",
     "cmd_bench_e2e",
     "cmd_bench_sim",
+    "cmd_bench_skeleton",
     "cmd_bench_tracking",
 ]
 
@@ -105,6 +106,22 @@ def cmd_bench_e2e(args: argparse.Namespace) -> int:
     return _report(args, result, (f"{key}: {value}" for key, value in result.items()))
 
 
+def cmd_bench_skeleton(args: argparse.Namespace) -> int:
+    """Speed and accuracy of the skeleton stage on real CMU motion."""
+    from optrack.bench.skeleton import skeleton_bench
+
+    result = skeleton_bench()
+    if "skipped" in result:
+        return _report(args, result, [result["skipped"]])
+    three = result["accuracy"]["3_sensors"]
+    line = (
+        f"{result['fps_1person_3sensors']} fps (one person, 3 sensors), "
+        f"{result['fps_4people_3sensors']} per person with four; 3 sensors: mean marker error "
+        f"{three['mean_error_m']} m, {three['lost_pct']} % lost"
+    )
+    return _report(args, result, [line])
+
+
 #: ``optrack bench WHAT``: each benchmark's handler.
 BENCHES = {
     "sim": cmd_bench_sim,
@@ -112,6 +129,7 @@ BENCHES = {
     "tracking": cmd_bench_tracking,
     "calibration": cmd_bench_calibration,
     "e2e": cmd_bench_e2e,
+    "skeleton": cmd_bench_skeleton,
 }
 
 

@@ -1,0 +1,48 @@
+"""``optrack bench skeleton``: its keys on a few frames of each setting (the figures
+themselves take minutes: that is for the command), its cache and its registration."""
+
+from __future__ import annotations
+
+import math
+
+from optrack.bench.cli import BENCHES, cmd_bench_skeleton
+from optrack.bench.skeleton import skeleton_bench
+
+KEYS = {
+    "fps_1person_3sensors",
+    "fps_4people_3sensors",
+    "ms_per_frame_p50",
+    "ms_per_frame_p95",
+    "particles",
+    "points_per_person",
+    "accuracy",
+}
+FIGURES = {"mean_error_m", "markers", "pct_under_0_10", "pct_under_0_15", "pct_under_0_20"}
+FIGURES |= {"lost_pct", "frames"}
+
+
+def test_bench_skeleton_keys_on_a_few_frames(shared_data, tmp_path, monkeypatch):
+    monkeypatch.setenv("OPTRACK_CACHE", str(tmp_path))
+    clip = "cmu_16_27_walk_turn_left.bvh"
+    result = skeleton_bench(seconds=0.2, clips=(clip,), speed_seconds=0.1)
+    assert KEYS <= set(result)
+    assert result["particles"] == 2000 and result["points_per_person"] == 500
+    for key in ("fps_1person_3sensors", "fps_4people_3sensors", "ms_per_frame_p50"):
+        assert math.isfinite(result[key]) and result[key] > 0
+    assert result["ms_per_frame_p95"] >= result["ms_per_frame_p50"]
+    assert set(result["accuracy"]) == {"3_sensors", "2_sensors", "1_sensor"}
+    for setting in result["accuracy"].values():
+        assert FIGURES <= set(setting)
+        assert setting["frames"] == 6  # 0.2 s at 30 Hz
+        assert set(setting["clips"]) == {"cmu_16_27_walk_turn_left"}
+    cached = sorted(p.name for p in (tmp_path / "bench").iterdir())
+    assert len(cached) == 2 and all(p.startswith("skeleton-") for p in cached)
+
+
+def test_bench_skeleton_skips_without_its_clips():
+    result = skeleton_bench(clips=("not_a_clip.bvh",))
+    assert set(result) == {"skipped"} and "not_a_clip.bvh" in result["skipped"]
+
+
+def test_bench_skeleton_is_registered():
+    assert BENCHES["skeleton"] is cmd_bench_skeleton
