@@ -5,10 +5,9 @@ geometry's backprojection, then the sensor's ``world_T_camera``), only in the
 image rectangle where the person's cylinder (below) can appear
 (:func:`person_roi`), without the pixels on depth edges (:func:`drop_edges`:
 flying pixels, which sit in mid-air between a silhouette and what is behind
-it); the frames
-fused at an instant are each sensor's nearest within half its frame period
-(:func:`nearest_frames`). A person's points are those in a vertical cylinder
-around their floor position (:func:`crop_person`): within ``radius`` of
+it); the frames fused at an instant are each sensor's nearest within half its
+frame period (:func:`nearest_frames`). A person's points are those in a vertical cylinder
+around their floor position (:func:`person_mask`): within ``radius`` of
 (x, y) on the floor, above ``floor_margin`` (the floor itself) and below
 their height plus ``head_margin``; a point nearer (on the floor) to another
 person's position than to theirs is left to that person. The cloud is then
@@ -33,7 +32,6 @@ from optrack.types import Intrinsics, RGBDFrame
 
 __all__ = [
     "FUSION_PARAMS",
-    "crop_person",
     "decimate",
     "drop_edges",
     "fuse_person",
@@ -216,6 +214,10 @@ def nearest_frames(
     return chosen
 
 
+def _points(cloud: np.ndarray) -> np.ndarray:
+    return np.asarray(cloud).reshape(-1, 3)
+
+
 def person_mask(
     points: np.ndarray,
     xy: Sequence[float],
@@ -225,7 +227,7 @@ def person_mask(
 ) -> np.ndarray:
     """Which of the points (N, 3) lie in the person's vertical cylinder (see the module
     docstring); ``others``: the other people's floor positions (M, 2)."""
-    points = np.asarray(points).reshape(-1, 3)
+    points = _points(points)
     dx = points[:, 0] - float(xy[0])
     dy = points[:, 1] - float(xy[1])
     near2 = dx * dx + dy * dy
@@ -240,18 +242,6 @@ def person_mask(
         ey = points[:, 1] - oy
         mask &= near2 <= ex * ex + ey * ey
     return mask
-
-
-def crop_person(
-    points: np.ndarray,
-    xy: Sequence[float],
-    height: float,
-    params: Params,
-    others: np.ndarray | Sequence[Sequence[float]] = (),
-) -> np.ndarray:
-    """The points (N, 3) in the person's cylinder (:func:`person_mask`)."""
-    points = np.asarray(points).reshape(-1, 3)
-    return points[person_mask(points, xy, height, params, others)]
 
 
 def decimate(points: np.ndarray, voxel: float, count: int, rng: np.random.Generator) -> np.ndarray:
@@ -280,7 +270,7 @@ def fuse_person(
     others: np.ndarray | Sequence[Sequence[float]] = (),
 ) -> np.ndarray:
     """One person's decimated cloud (K, 3) from every sensor's world points ``clouds``."""
-    parts = [crop_person(cloud, xy, height, params, others) for cloud in clouds]
+    parts = [c[person_mask(c, xy, height, params, others)] for c in map(_points, clouds)]
     merged = np.concatenate(parts) if parts else np.empty((0, 3))
     return decimate(merged, float(params.voxel), int(params.points), rng)
 

@@ -10,7 +10,6 @@ import pytest
 from optrack.geometry import backproject_points, make_pose, transform_points
 from optrack.skeleton.fusion import (
     FUSION_PARAMS,
-    crop_person,
     decimate,
     nearest_frames,
     person_cloud,
@@ -59,7 +58,8 @@ def test_the_crop_holds_the_persons_pixels_and_not_the_others(scene):
             assert np.all(owner[mask] == i)  # not the floor, the walls or the other person
             own = owner == i
             assert np.count_nonzero(mask & own) >= 0.98 * np.count_nonzero(own)
-            assert len(crop_person(world, xy[i], person.height, params)) >= np.count_nonzero(mask)
+            alone = person_mask(world, xy[i], person.height, params)  # nobody else about
+            assert np.all(alone[mask]) and np.count_nonzero(alone) >= np.count_nonzero(mask)
 
 
 def test_the_fused_cloud_lies_on_the_persons_bones(scene):
