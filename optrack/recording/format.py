@@ -14,6 +14,13 @@ A frame's image files are written first and its index line last, so a
 writer killed at any moment leaves every indexed frame readable; a last
 line cut short by the kill is ignored. Each sensor's index is in time
 order, so readers merge sensors in constant memory.
+
+The reader makes the writer's checks: an index or a ground truth that goes
+back in time, or an index entry naming a file outside its sensor's folder
+(an absolute path, ``..``), is refused as damaged. On closing, the writer
+announces its counts in the manifest (``extra.frames`` per sensor,
+``extra.ground_truth_instants``); a recording that holds fewer is read with
+one warning saying how much is missing.
 """
 
 from __future__ import annotations
