@@ -206,6 +206,7 @@ class MainWindow(QMainWindow):
             (source.log, self.log_panel.append),
             (source.connection, self.show_connection),
             (source.command_reply, self.recording.set_reply),
+            (source.skeletons, self.show_skeletons),
         ]
         for signal, slot in self._connections:
             signal.connect(slot)
@@ -243,6 +244,11 @@ class MainWindow(QMainWindow):
         self.world.overlay.show_message("" if connected else NO_SITE)
         self.outputs.set_connected(connected, text)
         self.tracks_table.set_site(text if not connected else f"{text}: waiting for tracks")
+
+    def show_skeletons(self, batch: Any) -> None:
+        """The skeletons (a ``SkeletonBatch``): drawn in the 3D view, state in the table."""
+        self.tracks_table.set_skeletons(batch)
+        self.world.set_skeletons(batch)
 
     def show_tracks(self, batch: TrackBatch) -> None:
         self.tracks_table.set_batch(batch)
@@ -343,6 +349,8 @@ class MainWindow(QMainWindow):
         self.top_view.set_trail_seconds(view.trail_seconds)
         self.world.trails.seconds = view.trail_seconds
         self.world.track_radius = view.track_radius
+        if "skeletons" in values:
+            self.world.set_show_skeletons(bool(view.skeletons))
         self.sensors.stale_after = view.status_timeout
         self.log_panel.max_lines = view.log_lines
         if {"frustum_depth", "coverage_depth"} & set(values):

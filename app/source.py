@@ -45,7 +45,16 @@ SENSOR_STATUS_KEYS: tuple[tuple[str, str, str], ...] = (
 )
 
 # The stages the site's nodes take live updates for, shown before a site says which it has.
-NODE_STAGES = ("detection", "tracking", "appearance", "smoothing", "outputs")
+NODE_STAGES = (
+    "detection",
+    "tracking",
+    "appearance",
+    "smoothing",
+    "outputs",
+    "skeleton_live",
+    "skeleton",
+    "skeleton_fusion",
+)
 
 
 def node_schemas() -> dict[str, Schema]:
@@ -79,6 +88,7 @@ class SiteSource(QObject):
     * ``connection(str description)``: the site now connected ("" when none).
     * ``command_reply(str action, bool ok, str sentence, object result)``: the
       answer to a recording or playback request (``result``: node -> its answer).
+    * ``skeletons(SkeletonBatch)``: the skeletons, while the skeleton stage runs.
     """
 
     tracks = Signal(object)
@@ -91,6 +101,7 @@ class SiteSource(QObject):
     log = Signal(str, str)
     connection = Signal(str)
     command_reply = Signal(str, bool, str, object)
+    skeletons = Signal(object)
 
     def describe(self) -> str:
         """One line for the status bar: which site this is."""

@@ -78,6 +78,12 @@ VIEW_PARAMS = register(
                 step=100,
                 help="The Log dock keeps this many most recent messages.",
             ),
+            Param(
+                "skeletons",
+                True,
+                help="Draw the people's skeletons in the 3D view (while the site's skeleton "
+                "stage runs).",
+            ),
         ],
         help="How the operator application draws the site (not sent to nodes).",
     )

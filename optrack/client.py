@@ -50,6 +50,7 @@ from optrack.net import (
     StatusMessage,
     TracksMessage,
 )
+from optrack.net.messages import SkeletonsMessage
 from optrack.outputs.streams import OUTPUT_PORTS
 from optrack.outputs.udp import join_destinations, parse_address, split_destinations
 from optrack.params import REGISTRY, Params, Schema
@@ -68,7 +69,8 @@ __all__ = ["EVENTS", "SiteClient"]
 #: (world frame), ``schemas({stage: Schema}, {stage: values})`` (stages seen for the first
 #: time), ``log(level, sentence)`` (``info``, ``warning``, ``error``),
 #: ``connection(description)`` (joined) and ``command_reply(action, ok, sentence,
-#: result)`` (the answer to a recording or playback command; ``result``: node -> answer).
+#: result)`` (the answer to a recording or playback command; ``result``: node -> answer)
+#: and ``skeletons(SkeletonBatch)`` (while the site's skeleton stage runs).
 EVENTS = (
     "tracks",
     "detections",
@@ -80,6 +82,7 @@ EVENTS = (
     "log",
     "connection",
     "command_reply",
+    "skeletons",
 )
 
 Callback = Callable[..., None]
@@ -180,6 +183,7 @@ class SiteClient:
         bus.subscribe(keys.calibration, CalibrationMessage, self._on_calibration)
         bus.subscribe(keys.status(), StatusMessage, self._on_status)
         bus.subscribe(keys.preview(), PreviewMessage, self._on_preview)
+        bus.subscribe(keys.skeletons, SkeletonsMessage, self._on_skeletons)
         self._connected.set()
         self._emit("connection", self.describe())
         self._emit("log", "info", f"Joined {self.describe()}; waiting for its nodes.")
@@ -204,6 +208,9 @@ class SiteClient:
     def _on_tracks(self, message: TracksMessage, key: str) -> None:
         self.latest_tracks = message.batch
         self._emit("tracks", message.batch)
+
+    def _on_skeletons(self, message: SkeletonsMessage, key: str) -> None:
+        self._emit("skeletons", message.batch)
 
     def _on_detections(self, message: DetectionsMessage, key: str) -> None:
         self._emit("detections", message.batch)

@@ -1,4 +1,5 @@
-"""The World 3D view: floor, cameras, their point clouds and the tracked people, in OpenGL."""
+"""The World 3D view: floor, cameras, their point clouds, the tracked people and (while the
+skeleton stage runs) their skeletons, in OpenGL."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from PySide6.QtWidgets import QSizePolicy
 from app.trails import TrailHistory, track_color
 from app.widgets.overlay import Overlay
 from optrack.geometry import camera_frustum
-from optrack.types import NetworkCalibration, TrackBatch
+from optrack.skeleton.joints import PARENT
+from optrack.types import NetworkCalibration, SkeletonBatch, TrackBatch
 
 FRUSTUM_COLOR = (0.45, 0.75, 1.0, 1.0)
 # Frustum vertices: 0 is the optical centre, 1-4 the image corners at depth.
@@ -20,6 +22,17 @@ FRUSTUM_EDGES = np.array([0, 1, 0, 2, 0, 3, 0, 4, 1, 2, 2, 3, 3, 4, 4, 1])
 # name is written to the right of it, so less room on that side.
 FRAME_X = (-0.9, 0.6)
 FRAME_Y = (-0.85, 0.85)
+# A skeleton's bones: each joint to its parent (optrack/skeleton/joints.py).
+BONES = tuple((joint, parent) for joint, parent in PARENT.items() if parent is not None)
+JOINT_SIZE_PX = 7.0
+
+
+def confidence_color(confidence: np.ndarray) -> np.ndarray:
+    """RGBA per joint: red at confidence 0 through yellow to green at 1."""
+    c = np.clip(np.asarray(confidence, dtype=np.float32), 0.0, 1.0)
+    red = np.clip(2.0 - 2.0 * c, 0.0, 1.0)
+    green = np.clip(2.0 * c, 0.0, 1.0)
+    return np.column_stack([red, green, np.full_like(c, 0.1), np.ones_like(c)])
 
 
 def _rgba(rgb: tuple[int, int, int], alpha: float = 1.0) -> tuple[float, float, float, float]:
@@ -94,6 +107,10 @@ class WorldView(gl.GLViewWidget):
         self.clouds: dict[str, gl.GLScatterPlotItem] = {}
         self.people: dict[int, tuple[gl.GLMeshItem, gl.GLTextItem]] = {}
         self.trail_items: dict[int, gl.GLLinePlotItem] = {}
+        # Skeletons: each track's bones (its colour) and joints (by confidence).
+        self.skeletons: dict[int, tuple[gl.GLLinePlotItem, gl.GLScatterPlotItem]] = {}
+        self.show_skeletons = True
+        self._skeletons = SkeletonBatch(stamp=0.0)
 
     # ---------------------------------------------------------------- cameras
     def set_calibration(self, calibration: NetworkCalibration, frustum_depth: float) -> None:
@@ -229,3 +246,36 @@ class WorldView(gl.GLViewWidget):
                 self.addItem(item)
                 self.trail_items[track_id] = item
             item.setData(pos=pos)
+
+    # -------------------------------------------------------------- skeletons
+    def set_show_skeletons(self, show: bool) -> None:
+        """Draw the skeletons or not (the ``view.skeletons`` toggle)."""
+        self.show_skeletons = bool(show)
+        self.set_skeletons(self._skeletons)
+
+    def set_skeletons(self, batch: SkeletonBatch) -> None:
+        """Each skeleton's bones in its track's colour and its joints coloured by
+        confidence; a lost skeleton (no joints) and one no longer sent are removed."""
+        self._skeletons = batch
+        shown = {s.id: s for s in batch.skeletons if s.joints} if self.show_skeletons else {}
+        for track_id in [k for k in self.skeletons if k not in shown]:
+            for item in self.skeletons.pop(track_id):
+                self.removeItem(item)
+        for track_id, skeleton in shown.items():
+            if track_id not in self.skeletons:
+                bones = gl.GLLinePlotItem(color=_rgba(track_color(track_id)), width=3, mode="lines")
+                joints = gl.GLScatterPlotItem(size=JOINT_SIZE_PX, pxMode=True)
+                bones.setDepthValue(5)
+                joints.setDepthValue(6)  # over the bones and the person's cylinder
+                self.addItem(bones)
+                self.addItem(joints)
+                self.skeletons[track_id] = (bones, joints)
+            bones, joints = self.skeletons[track_id]
+            pairs = [
+                (skeleton.joints[a][:3], skeleton.joints[b][:3])
+                for a, b in BONES
+                if a in skeleton.joints and b in skeleton.joints
+            ]
+            bones.setData(pos=np.asarray(pairs, dtype=np.float32).reshape(-1, 3))
+            values = np.asarray(list(skeleton.joints.values()), dtype=np.float32)
+            joints.setData(pos=values[:, :3], color=confidence_color(values[:, 3]))
