@@ -18,7 +18,7 @@ import numba
 import numpy as np
 
 from optrack.params import Params
-from optrack.skeleton.likelihood import associate, log_likelihood, signed_distance
+from optrack.skeleton.likelihood import associate, signed_distance
 from optrack.skeleton.model import (
     FRAMES,
     LIMITS,
@@ -32,6 +32,7 @@ from optrack.skeleton.model import (
     part_reach,
 )
 from optrack.skeleton.params import SKELETON_PARAMS
+from optrack.skeleton.score import score_particles
 
 __all__ = [
     "PARTITION_FRAMES",
@@ -172,18 +173,17 @@ class SkeletonFilter:
         p = self.params
         dims = PARTITIONS[partition]
         parts = PARTITION_PARTS[partition] if parts is None else np.asarray(parts)
-        scored, baseline, base = self._scored_points(points, partition, gate)
+        scored, baseline = self._scored_points(points, partition, gate)
         shown = len(scored) if partition == "torso" else len(points)
         expected = self.expected_support(shown)[parts]
         idx = np.array(dims)
-        if base is not None:  # the fixed pose, for every particle, filled once
-            n = len(self.particles)
-            base = (
-                np.broadcast_to(base[0], (n, *base[0].shape)).copy(),
-                np.broadcast_to(base[1], (n, *base[1].shape)).copy(),
-            )
+        consts = (float(p.sigma), float(p.alpha), float(p.support_weight))
+        frames = PARTITION_FRAMES[partition]
         for layer in range(layers):
-            ll = self._score(scored, baseline, base, partition, parts, expected)
+            ll = score_particles(
+                self.particles, self.estimate, dims, frames, parts, self.shape, scored,
+                expected, consts, baseline, int(p.threads),
+            )  # fmt: skip
             beta = annealing_exponent(ll, float(p.survival_rate))
             w = np.exp(beta * (ll - ll.max()))
             w /= w.sum()
@@ -201,34 +201,14 @@ class SkeletonFilter:
             delta = self.particles[:, _YAW] - self.estimate[_YAW]
             self.particles[:, _YAW] = self.estimate[_YAW] + np.angle(np.exp(1j * delta))
 
-    def _score(self, scored, baseline, base, partition, parts, expected) -> np.ndarray:
-        p = self.params
-        # Partitioned sampling: this partition's numbers from the particles, the others at
-        # the estimate (the torso is scored with the limbs where they were last found).
-        state = np.broadcast_to(self.estimate, self.particles.shape).copy()
-        dims = list(PARTITIONS[partition])
-        state[:, dims] = self.particles[:, dims]
-        pts, rot = forward_kinematics(state, self.shape, PARTITION_FRAMES[partition], out=base)
-        geometry = part_geometry(pts, rot, self.shape, parts)
-        return log_likelihood(
-            scored,
-            geometry,
-            expected,
-            float(p.sigma),
-            float(p.alpha),
-            float(p.support_weight),
-            baseline,
-            int(p.threads),
-        )
-
     def _scored_points(self, points: np.ndarray, partition: str, gate: bool):
-        """The points a partition is scored on, their baseline, and the fixed pose's FK."""
+        """The points a partition is scored on and their baseline (None for the torso)."""
         p = self.params
         if partition == "torso":
             keep = int(p.torso_points)
             if len(points) > keep:
                 points = points[self.rng.choice(len(points), keep, replace=False)]
-            return points, None, None
+            return points, None
         base = forward_kinematics(self.estimate, self.shape)
         done = list(PARTITIONS).index(partition)
         fixed = np.array(
@@ -245,7 +225,7 @@ class SkeletonFilter:
             reach = part_reach(self.shape, parts) + float(p.reach_margin)
             near = np.linalg.norm(points - base[0][_ROOT_JOINT[partition]], axis=1) < reach
         keep = near & (baseline > float(p.explained_skip))
-        return points[keep], baseline[keep], base
+        return points[keep], baseline[keep]
 
     def fit(self, points: np.ndarray, state: np.ndarray | None = None) -> tuple[float, np.ndarray]:
         """How well a pose (the estimate by default) explains ``points``: the share of points

@@ -33,6 +33,9 @@ import numpy as np
 
 from optrack.skeleton.model import G
 
+W = 16  # points per block of the distance loop (one AVX-512 vector of float32)
+_FAR = 1.0e4  # the baseline of a point no fixed part explains (far beyond any alpha)
+
 __all__ = [
     "associate",
     "log_likelihood",
@@ -102,45 +105,106 @@ def log_likelihood_numpy(
     return -data - support_weight * deficit.sum(axis=1)
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True)
-def _kernel(px, py, pz, baseline, geometry, expected, consts, out):
-    """consts: 1 / (2 sigma^2), alpha, support_weight."""
+@numba.njit(cache=True, fastmath=True)
+def _extent(g, axis: int, reach: float) -> tuple[float, float]:
+    """The interval along ``axis`` outside which every point is at least ``alpha`` radii
+    from the part (``reach``: (1 + alpha) times its largest forward radius): its axis
+    segment widened by the half-extent of the ellipsoid of radii reach, reach * aspect."""
+    ux, uy, uz, ex, ey, ez = g[3], g[4], g[5], g[6], g[7], g[8]
+    side = (uy * ez - uz * ey, uz * ex - ux * ez, ux * ey - uy * ex)[axis]  # u x e: the side axis
+    aspect = 1.0 / np.sqrt(g[9] * g[9] + g[10] * g[10] + g[11] * g[11])
+    u, e = g[3 + axis], g[6 + axis]
+    half = reach * np.sqrt(u * u + e * e + (aspect * side) ** 2) * 1.001 + 1e-4
+    start, end = g[axis] + g[12] * u, g[axis] + g[13] * u
+    return min(start, end) - half, max(start, end) + half
+
+
+@numba.njit(cache=True)
+def _first_at_least(key, value: float) -> int:
+    """The first index of the sorted ``key`` at or above ``value`` (a binary search)."""
+    low, high = 0, key.shape[0]
+    while low < high:
+        mid = (low + high) // 2
+        if key[mid] < value:
+            low = mid + 1
+        else:
+            high = mid
+    return low
+
+
+@numba.njit(fastmath=True, inline="always")
+def likelihood_pose(px, py, pz, axis, baseline, geometry, expected, consts):
+    """Eq. 9 for one pose, geometry (K, G), of a cloud from :func:`sorted_points`
+    (sorted along ``axis``): each part visits only the run of points that can lie within
+    alpha of it. consts: 1 / (2 sigma^2), alpha, support_weight. Inlined where it is
+    called, where its arrays are known apart: so its distance loop vectorises."""
     inv_two_sigma2, alpha, weight = consts[0], np.float32(consts[1]), consts[2]
     n = px.shape[0]
-    parts = geometry.shape[1]
+    key = (px, py, pz)[axis]
+    best = baseline.copy()
+    area = np.full(n, -1, dtype=np.int32)
+    for k in range(geometry.shape[0]):
+        g = geometry[k]
+        ax, ay, az, ux, uy, uz = g[0], g[1], g[2], g[3], g[4], g[5]
+        ex, ey, ez, fx, fy, fz = g[6], g[7], g[8], g[9], g[10], g[11]
+        s0, s1, r0, dr, inv_length = g[12], g[13], g[14], g[15], g[16]
+        half = np.float32(0.5) / inv_length
+        near, far = np.int32(2 * k), np.int32(2 * k + 1)
+        low, high = _extent(g, axis, (1.0 + consts[1]) * max(r0, r0 + dr))
+        # Whole blocks of W from 0 on views: no remainder, no wraparound; it vectorises.
+        lo = _first_at_least(key, low) // W * W
+        hi = min(-(-_first_at_least(key, high) // W) * W, n)
+        qx, qy, qz, qb, qa = px[lo:hi], py[lo:hi], pz[lo:hi], best[lo:hi], area[lo:hi]
+        for i in range(hi - lo):  # no branches
+            vx, vy, vz = qx[i] - ax, qy[i] - ay, qz[i] - az
+            s = vx * ux + vy * uy + vz * uz
+            e = vx * ex + vy * ey + vz * ez
+            f = vx * fx + vy * fy + vz * fz
+            o = max(max(s0 - s, s - s1), np.float32(0.0))
+            r = r0 + dr * min(max(s * inv_length, np.float32(0.0)), np.float32(1.0))
+            d = abs(np.sqrt(e * e + f * f + o * o) / r - np.float32(1.0))
+            better = d < qb[i]
+            qb[i] = d if better else qb[i]
+            qa[i] = (far if s >= half else near) if better else qa[i]
+    total = 0.0
+    counts = np.zeros(2 * geometry.shape[0])
+    for i in range(n):
+        b = min(best[i], alpha)
+        total += b * b
+        if area[i] >= 0 and best[i] < alpha:
+            counts[area[i]] += 1.0
+    deficit = 0.0
+    for j in range(counts.shape[0]):
+        if expected[j] > 0.0:
+            deficit += max(0.0, 1.0 - counts[j] / expected[j])
+    return -total * inv_two_sigma2 / max(n, 1) - weight * deficit
+
+
+@numba.njit(parallel=True, fastmath=True, cache=True)
+def _kernel(px, py, pz, axis, baseline, geometry, expected, consts, out):
     for p in numba.prange(geometry.shape[0]):
-        best = baseline.copy()
-        area = np.full(n, -1, dtype=np.int32)
-        for k in range(parts):
-            g = geometry[p, k]
-            ax, ay, az, ux, uy, uz = g[0], g[1], g[2], g[3], g[4], g[5]
-            ex, ey, ez, fx, fy, fz = g[6], g[7], g[8], g[9], g[10], g[11]
-            s0, s1, r0, dr, inv_length = g[12], g[13], g[14], g[15], g[16]
-            half = np.float32(0.5) / inv_length
-            near, far = np.int32(2 * k), np.int32(2 * k + 1)
-            for i in range(n):  # no branches, so that it vectorises
-                vx, vy, vz = px[i] - ax, py[i] - ay, pz[i] - az
-                s = vx * ux + vy * uy + vz * uz
-                e = vx * ex + vy * ey + vz * ez
-                f = vx * fx + vy * fy + vz * fz
-                o = max(max(s0 - s, s - s1), np.float32(0.0))
-                r = r0 + dr * min(max(s * inv_length, np.float32(0.0)), np.float32(1.0))
-                d = abs(np.sqrt(e * e + f * f + o * o) / r - np.float32(1.0))
-                better = d < best[i]
-                best[i] = d if better else best[i]
-                area[i] = (far if s >= half else near) if better else area[i]
-        total = 0.0
-        counts = np.zeros(2 * parts, dtype=np.float64)
-        for i in range(n):
-            b = min(best[i], alpha)
-            total += b * b
-            if area[i] >= 0 and best[i] < alpha:
-                counts[area[i]] += 1.0
-        deficit = 0.0
-        for j in range(2 * parts):
-            if expected[j] > 0.0:
-                deficit += max(0.0, 1.0 - counts[j] / expected[j])
-        out[p] = -total * inv_two_sigma2 / max(n, 1) - weight * deficit
+        out[p] = likelihood_pose(px, py, pz, axis, baseline, geometry[p], expected, consts)
+
+
+def sorted_points(points: np.ndarray, baseline: np.ndarray | None) -> tuple:
+    """The kernels' view of a cloud: (x, y, z, axis, baseline), the points (float32, one
+    contiguous array per coordinate) sorted along the axis of their largest extent, the
+    baseline (none: a distance far beyond alpha) in the same order."""
+    pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+    axis = int(np.argmax(np.ptp(pts, axis=0))) if len(pts) else 2
+    order = np.argsort(pts[:, axis], kind="stable")
+    pts = pts[order]
+    if baseline is None:
+        base = np.full(len(pts), _FAR, dtype=np.float32)
+    else:
+        base = np.asarray(baseline, dtype=np.float32)[order]
+    x, y, z = (np.ascontiguousarray(pts[:, j]) for j in range(3))
+    return x, y, z, axis, base
+
+
+def set_threads(threads: int) -> None:
+    """How many CPU threads numba's parallel loops share their poses among."""
+    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
 
 
 def log_likelihood(
@@ -158,24 +222,12 @@ def log_likelihood(
     Same arguments and result as :func:`log_likelihood_numpy`; ``threads``: how many
     CPU threads share the poses (more helps only where cores are idle: a thread that
     has to wait for a busy core holds every other one up)."""
-    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
-    pts = np.asarray(points, dtype=np.float32)
     geometry = np.ascontiguousarray(geometry, dtype=np.float32)
     if geometry.shape[2] != G:
         raise ValueError(f"part geometry must have {G} fields per part; got {geometry.shape[2]}.")
-    if baseline is None:
-        base = np.full(len(pts), np.inf, dtype=np.float32)
-    else:
-        base = np.asarray(baseline, dtype=np.float32).copy()
     out = np.empty(len(geometry), dtype=np.float64)
-    _kernel(
-        np.ascontiguousarray(pts[:, 0]),
-        np.ascontiguousarray(pts[:, 1]),
-        np.ascontiguousarray(pts[:, 2]),
-        base,
-        geometry,
-        np.asarray(expected, dtype=np.float64).reshape(-1),
-        np.array([1.0 / (2.0 * sigma * sigma), alpha, support_weight]),
-        out,
-    )
+    consts = np.array([1.0 / (2.0 * sigma * sigma), alpha, support_weight])
+    expected = np.asarray(expected, dtype=np.float64).reshape(-1)
+    set_threads(threads)
+    _kernel(*sorted_points(points, baseline), geometry, expected, consts, out)
     return out

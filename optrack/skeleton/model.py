@@ -305,6 +305,11 @@ class BodyShape:
         return self._offsets.copy()
 
     @functools.cached_property
+    def radii_array(self) -> np.ndarray:
+        """:attr:`radii` as a (K, 2) array (what the kernels read)."""
+        return np.asarray(self.radii, dtype=np.float64)
+
+    @functools.cached_property
     def _offsets(self) -> np.ndarray:
         o = {
             "pelvis": (0.0, 0.0, 0.0),
@@ -352,43 +357,55 @@ _POINT_FRAME_I = np.array([_FI[row[2]] for row in _POINT_TABLE])
 
 
 @numba.njit(cache=True, fastmath=True)
-def _fk_kernel(
+def fk_pose(
     x, cos_x, sin_x, offsets, chosen, rot, pts, fparent, fdof, faxis, fsign, pparent, pframe
 ):
-    """Fill rot (P, F, 3, 3) and pts (P, Q, 3) for the chosen frames and their points."""
+    """One pose: fill rot (F, 3, 3) and pts (Q, 3) for the chosen frames and their points
+    (the others are read as they are there); x, cos_x, sin_x (D,)."""
+    for f in range(fparent.shape[0]):
+        if not chosen[f]:
+            continue
+        q = fparent[f]
+        for r in range(3):
+            for c in range(3):
+                rot[f, r, c] = rot[q, r, c] if q >= 0 else (1.0 if r == c else 0.0)
+        for j in range(3):  # R <- R @ (rotation about axis k by the dof's angle)
+            d = fdof[f, j]
+            if d < 0:
+                break
+            k = faxis[f, j]
+            i, m = (k + 1) % 3, (k + 2) % 3
+            cos, sin = cos_x[d], sin_x[d] * fsign[f, j]
+            for r in range(3):
+                ri, rm = rot[f, r, i], rot[f, r, m]
+                rot[f, r, i] = cos * ri + sin * rm
+                rot[f, r, m] = cos * rm - sin * ri
+    for n in range(pparent.shape[0]):
+        f = pframe[n]
+        if not chosen[f]:
+            continue
+        q = pparent[n]
+        for r in range(3):
+            if q < 0:
+                pts[n, r] = x[r]
+            else:
+                pts[n, r] = pts[q, r] + (
+                    rot[f, r, 0] * offsets[n, 0]
+                    + rot[f, r, 1] * offsets[n, 1]
+                    + rot[f, r, 2] * offsets[n, 2]
+                )
+
+
+@numba.njit(cache=True, fastmath=True)
+def _fk_kernel(x, cos_x, sin_x, offsets, chosen, rot, pts, *tables):
     for p in range(x.shape[0]):
-        for f in range(fparent.shape[0]):
-            if not chosen[f]:
-                continue
-            q = fparent[f]
-            for r in range(3):
-                for c in range(3):
-                    rot[p, f, r, c] = rot[p, q, r, c] if q >= 0 else (1.0 if r == c else 0.0)
-            for j in range(3):  # R <- R @ (rotation about axis k by the dof's angle)
-                d = fdof[f, j]
-                if d < 0:
-                    break
-                k = faxis[f, j]
-                i, m = (k + 1) % 3, (k + 2) % 3
-                cos, sin = cos_x[p, d], sin_x[p, d] * fsign[f, j]
-                for r in range(3):
-                    ri, rm = rot[p, f, r, i], rot[p, f, r, m]
-                    rot[p, f, r, i] = cos * ri + sin * rm
-                    rot[p, f, r, m] = cos * rm - sin * ri
-        for n in range(pparent.shape[0]):
-            f = pframe[n]
-            if not chosen[f]:
-                continue
-            q = pparent[n]
-            for r in range(3):
-                if q < 0:
-                    pts[p, n, r] = x[p, r]
-                else:
-                    pts[p, n, r] = pts[p, q, r] + (
-                        rot[p, f, r, 0] * offsets[n, 0]
-                        + rot[p, f, r, 1] * offsets[n, 1]
-                        + rot[p, f, r, 2] * offsets[n, 2]
-                    )
+        fk_pose(x[p], cos_x[p], sin_x[p], offsets, chosen, rot[p], pts[p], *tables)
+
+
+# The kinematic tables in the order fk_pose reads them (after pts).
+FK_TABLES = (
+    _FRAME_PARENT_I, _FRAME_DOF_I, _FRAME_AXIS_I, _FRAME_SIGN, _POINT_PARENT_I, _POINT_FRAME_I,
+)  # fmt: skip
 
 
 def forward_kinematics(
@@ -425,10 +442,7 @@ def forward_kinematics(
     cos_x, sin_x = np.empty((n, D), np.float32), np.empty((n, D), np.float32)
     turned = x[:, angles].astype(np.float32)
     cos_x[:, angles], sin_x[:, angles] = np.cos(turned), np.sin(turned)
-    _fk_kernel(
-        x, cos_x, sin_x, shape._offsets, chosen, rotations, points, _FRAME_PARENT_I, _FRAME_DOF_I,
-        _FRAME_AXIS_I, _FRAME_SIGN, _POINT_PARENT_I, _POINT_FRAME_I,
-    )  # fmt: skip
+    _fk_kernel(x, cos_x, sin_x, shape._offsets, chosen, rotations, points, *FK_TABLES)
     if single:
         return points[0], rotations[0]
     return points, rotations
@@ -450,39 +464,45 @@ G = len(GEOMETRY_FIELDS)
 
 
 @numba.njit(cache=True, fastmath=True)
+def geometry_pose(pts, rot, parts, pa, pb, pf, pt, aspect, radii, out):
+    """One pose's rows of :func:`part_geometry`: pts (Q, 3), rot (F, 3, 3), out (len(parts), G)."""
+    for j in range(parts.shape[0]):
+        k = parts[j]
+        a, b, f = pa[k], pb[k], pf[k]
+        u0 = pts[b, 0] - pts[a, 0]
+        u1 = pts[b, 1] - pts[a, 1]
+        u2 = pts[b, 2] - pts[a, 2]
+        length = max(np.sqrt(u0 * u0 + u1 * u1 + u2 * u2), 1e-9)
+        u0, u1, u2 = u0 / length, u1 / length, u2 / length
+        # The forward axis: the frame's x made square to the bone (its y if parallel).
+        c = 0 if abs(rot[f, 0, 0] * u0 + rot[f, 1, 0] * u1 + rot[f, 2, 0] * u2) < 0.999 else 1
+        dot = rot[f, 0, c] * u0 + rot[f, 1, c] * u1 + rot[f, 2, c] * u2
+        e0 = rot[f, 0, c] - dot * u0
+        e1 = rot[f, 1, c] - dot * u1
+        e2 = rot[f, 2, c] - dot * u2
+        en = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        e0, e1, e2 = e0 / en, e1 / en, e2 / en
+        w = 1.0 / aspect[k]
+        row = out[j]
+        row[0], row[1], row[2] = pts[a, 0], pts[a, 1], pts[a, 2]
+        row[3], row[4], row[5] = u0, u1, u2
+        row[6], row[7], row[8] = e0, e1, e2
+        row[9] = (u1 * e2 - u2 * e1) * w
+        row[10] = (u2 * e0 - u0 * e2) * w
+        row[11] = (u0 * e1 - u1 * e0) * w
+        row[12], row[13] = pt[k, 0] * length, pt[k, 1] * length
+        row[14], row[15] = radii[k, 0], radii[k, 1] - radii[k, 0]
+        row[16] = 1.0 / length
+
+
+@numba.njit(cache=True, fastmath=True)
 def _geometry_kernel(pts, rot, parts, pa, pb, pf, pt, aspect, radii, out):
     for p in range(pts.shape[0]):
-        for j in range(parts.shape[0]):
-            k = parts[j]
-            a, b, f = pa[k], pb[k], pf[k]
-            u0 = pts[p, b, 0] - pts[p, a, 0]
-            u1 = pts[p, b, 1] - pts[p, a, 1]
-            u2 = pts[p, b, 2] - pts[p, a, 2]
-            length = max(np.sqrt(u0 * u0 + u1 * u1 + u2 * u2), 1e-9)
-            u0, u1, u2 = u0 / length, u1 / length, u2 / length
-            # The forward axis: the frame's x made square to the bone (its y if parallel).
-            c = (
-                0
-                if abs(rot[p, f, 0, 0] * u0 + rot[p, f, 1, 0] * u1 + rot[p, f, 2, 0] * u2) < 0.999
-                else 1
-            )
-            dot = rot[p, f, 0, c] * u0 + rot[p, f, 1, c] * u1 + rot[p, f, 2, c] * u2
-            e0 = rot[p, f, 0, c] - dot * u0
-            e1 = rot[p, f, 1, c] - dot * u1
-            e2 = rot[p, f, 2, c] - dot * u2
-            en = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-            e0, e1, e2 = e0 / en, e1 / en, e2 / en
-            w = 1.0 / aspect[k]
-            row = out[p, j]
-            row[0], row[1], row[2] = pts[p, a, 0], pts[p, a, 1], pts[p, a, 2]
-            row[3], row[4], row[5] = u0, u1, u2
-            row[6], row[7], row[8] = e0, e1, e2
-            row[9] = (u1 * e2 - u2 * e1) * w
-            row[10] = (u2 * e0 - u0 * e2) * w
-            row[11] = (u0 * e1 - u1 * e0) * w
-            row[12], row[13] = pt[k, 0] * length, pt[k, 1] * length
-            row[14], row[15] = radii[k, 0], radii[k, 1] - radii[k, 0]
-            row[16] = 1.0 / length
+        geometry_pose(pts[p], rot[p], parts, pa, pb, pf, pt, aspect, radii, out[p])
+
+
+# The part tables in the order geometry_pose reads them (after parts).
+PART_TABLES = (_PART_A, _PART_B, _PART_FRAME, _PART_T, _PART_ASPECT)
 
 
 def part_geometry(
@@ -498,10 +518,7 @@ def part_geometry(
     """
     k = np.arange(len(PARTS)) if parts is None else np.asarray(parts, dtype=np.int64)
     out = np.empty((len(points), len(k), G), dtype=np.float32)
-    _geometry_kernel(
-        points, rotations, k, _PART_A, _PART_B, _PART_FRAME, _PART_T, _PART_ASPECT,
-        np.asarray(shape.radii, dtype=np.float64), out,
-    )  # fmt: skip
+    _geometry_kernel(points, rotations, k, *PART_TABLES, shape.radii_array, out)
     return out
 
 
