@@ -109,3 +109,92 @@ def test_a_client_that_leaves_does_not_disturb_the_server():
             assert client.recv(timeout=3) == '{"after":1}'
     finally:
         server.close()
+
+
+@pytest.mark.parametrize(
+    ("origin", "admitted"),
+    [
+        (None, True),  # not a browser page
+        ("null", True),  # a file opened from disk
+        ("http://localhost:8000", True),
+        ("https://localhost", True),
+        ("http://127.0.0.1:5173", True),
+        ("http://[::1]:8080", True),
+        ("https://evil.example", False),
+        ("http://localhost.evil.example", False),
+        ("http://192.168.1.7", False),
+    ],
+)
+def test_only_pages_of_the_allowed_origins_may_connect(origin, admitted):
+    """Issue 20: any web page the operator opened could read the tracks."""
+    from websockets.exceptions import InvalidStatus
+
+    server = WebSocketServer("127.0.0.1", 0)
+    headers = {"Origin": origin} if origin else {}
+    try:
+        if admitted:
+            with connect(f"ws://127.0.0.1:{server.port}", proxy=None, additional_headers=headers):
+                pass
+        else:
+            with pytest.raises(InvalidStatus, match="403"):
+                connect(f"ws://127.0.0.1:{server.port}", proxy=None, additional_headers=headers)
+        status = server.status()
+        assert (server.refused, status.errors) == ((0, 0) if admitted else (1, 1))
+        assert (
+            admitted
+            or status.last_error == f"a page of {origin} (not in the allowed origins) was refused"
+        )
+    finally:
+        server.close()
+
+
+def test_a_token_is_required_when_set_and_an_allow_list_can_name_a_page():
+    from websockets.exceptions import InvalidStatus
+
+    server = WebSocketServer(
+        "127.0.0.1", 0, origins=["https://tracks.example:8443"], token="s3cret"
+    )
+    url = f"ws://127.0.0.1:{server.port}"
+    page = {"Origin": "https://tracks.example:8443"}
+    try:
+        with connect(f"{url}/?token=s3cret", proxy=None, additional_headers=page):
+            pass
+        for target, headers in (
+            (f"{url}/?token=wrong", page),
+            (url, page),
+            (f"{url}/?token=s3cret", {"Origin": "null"}),
+        ):
+            with pytest.raises(InvalidStatus, match="403"):
+                connect(target, proxy=None, additional_headers=headers)
+        assert server.refused == 3
+    finally:
+        server.close()
+
+
+def test_an_oversize_message_closes_its_client_and_is_counted_not_logged_as_a_traceback(caplog):
+    from websockets.exceptions import ConnectionClosedError
+
+    server = WebSocketServer("127.0.0.1", 0, max_size=1000)
+    try:
+        for _ in range(2):
+            with connect(f"ws://127.0.0.1:{server.port}", proxy=None) as client:
+                client.send("x" * 2000)
+                with pytest.raises(ConnectionClosedError, match="1009"):
+                    client.recv(timeout=3)
+        deadline = time.monotonic() + 3
+        while server.oversize < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert server.oversize == 2 and server.status().errors == 2
+        with connect(f"ws://127.0.0.1:{server.port}", proxy=None) as client:
+            while server.clients < 1 and time.monotonic() < deadline + 3:
+                time.sleep(0.01)
+            server.send('{"still": "serving"}')
+            assert client.recv(timeout=3) == '{"still": "serving"}'
+    finally:
+        server.close()
+    assert not any(record.exc_info for record in caplog.records)
+    warnings = [r.getMessage() for r in caplog.records if r.name == "optrack.outputs"]
+    assert warnings == [
+        "WebSocket output: a client's message over 1000 bytes closed it "
+        "(further such clients are only counted)"
+    ]
