@@ -19,6 +19,7 @@ from optrack.recording.format import (
     GROUND_TRUTH,
     INDEX,
     MANIFEST,
+    SENSOR_ID,
     SENSORS_DIR,
     STREAMS,
     GroundTruth,
@@ -27,7 +28,7 @@ from optrack.recording.format import (
     RecordingError,
     SensorInfo,
 )
-from optrack.types import RGBDFrame
+from optrack.types import RGBDFrame, pose_problem
 
 __all__ = ["Recording", "is_recording"]
 
@@ -63,6 +64,23 @@ def _read_jsonl(path: Path, kind: type[msgspec.Struct]) -> Iterator[msgspec.Stru
                 )
             last = item.t  # type: ignore[attr-defined]
             yield item
+
+
+def _check_sensor(info: SensorInfo, manifest: Path) -> None:
+    """The writer's checks of a sensor's entry, and values no sensor has."""
+    if not SENSOR_ID.match(info.id):
+        problem = "an id that cannot name a folder (letters, digits, '_', '-' or '.')"
+    elif not 0 < info.depth_scale < float("inf"):
+        problem = f"depth_scale {info.depth_scale} (metres per depth unit, above 0)"
+    elif info.fps is not None and not 0 < info.fps < float("inf"):
+        problem = f"fps {info.fps} (frames per second, above 0)"
+    elif info.world_T_camera is not None and (
+        reason := pose_problem(np.asarray(info.world_T_camera, dtype=np.float64))
+    ):
+        problem = f"a world_T_camera that {reason}"
+    else:
+        return
+    raise RecordingError(f"{manifest} is damaged: sensor '{info.id}' has {problem}.")
 
 
 class Recording:
@@ -102,6 +120,8 @@ class Recording:
             self.manifest: Manifest = msgspec.convert(data, Manifest)
         except msgspec.ValidationError as error:
             raise RecordingError(f"{manifest_path} is damaged ({error}).") from None
+        for info in self.manifest.sensors:
+            _check_sensor(info, manifest_path)
         self.sensors: dict[str, SensorInfo] = {s.id: s for s in self.manifest.sensors}
         self._told: set[str] = set()  # the parts already said to be partial
 

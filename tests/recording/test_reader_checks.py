@@ -124,3 +124,26 @@ def test_a_partial_recording_is_scored_with_the_sentence_on_stderr(rec0):
         "announces (5 missing, 50%)"
     ) in done.stderr
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "problem"),
+    [
+        ("id", "../../etc", "an id that cannot name a folder"),
+        ("depth_scale", -1.0, "depth_scale -1.0 (metres per depth unit, above 0)"),
+        ("depth_scale", float("nan"), "depth_scale nan"),
+        ("fps", 0.0, "fps 0.0 (frames per second, above 0)"),
+        (
+            "world_T_camera",
+            [[1, 0, 0, 1e308], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]],
+            "a world_T_camera that moves 1e+308 m, beyond the 1000 m a site spans",
+        ),
+    ],
+)
+def test_a_manifest_sensor_the_writer_would_refuse_is_refused(rec0, field, value, problem):
+    manifest = yaml.safe_load((rec0 / "manifest.yaml").read_text())
+    manifest["sensors"][0][field] = value
+    (rec0 / "manifest.yaml").write_text(yaml.safe_dump(manifest))
+    with pytest.raises(RecordingError) as error:
+        Recording(rec0)
+    assert problem in str(error.value) and "is damaged: sensor" in str(error.value)
