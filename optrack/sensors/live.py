@@ -280,6 +280,8 @@ class LiveSensor(Sensor):
     def read(self) -> RGBDFrame | None:
         with self._lock:
             if not self._opened:
+                if self._closing.is_set():
+                    return None  # closed, maybe from another thread: open() to read again
                 self.open()
             while not self._closing.is_set():
                 try:

@@ -22,6 +22,13 @@ exit it closes every open sensor and leaves the rest to the process exit.
 Closing a sensor stops its streams (no sooner than three frame periods after
 starting them: the Dummy driver crashes otherwise), waits two frame periods,
 then destroys them and closes the device.
+
+Closing from another thread: OpenNI2's ``oniWaitForAnyStream`` starts its
+wait again whenever any stream in the process signals a frame, so one long
+wait was seen never to return (a sensor reopened after another was closed
+from a second thread). A read therefore waits in slices of
+:data:`WAIT_SLICE_S`, checking between them whether the sensor is closing,
+and ends within a few milliseconds of ``close()``.
 """
 
 from __future__ import annotations
@@ -103,6 +110,9 @@ OPENNI_PARAMS = register(
 #: PS1080 data sheet (Kinect v1, Xtion, Carmine); used only when the driver
 #: reports none (the Dummy device).
 NOMINAL_FOV_DEG = (58.0, 45.0)
+
+#: Longest single wait inside OpenNI2 for a frame (s); see ``OpenNISensor._grab``.
+WAIT_SLICE_S = 0.005
 
 
 class _Stream:
@@ -407,7 +417,7 @@ class OpenNISensor(LiveSensor):
         handles = [s.stream for s in self._streams.values()]
         if not handles:
             raise DeviceLost("the device is closed")
-        while True:
+        while not self._closing.is_set():
             frame = self._pair()
             if frame is not None:
                 return frame
@@ -417,15 +427,19 @@ class OpenNISensor(LiveSensor):
             if remaining < 0.001:
                 return None
             try:
-                ready = openni2.wait_for_any_stream(handles, remaining)
+                # OpenNI2 starts its wait again whenever any stream of the process has a
+                # new frame, so a long wait may never end while other streams run: wait
+                # in slices shorter than a frame period, checking for close in between.
+                ready = openni2.wait_for_any_stream(handles, min(remaining, WAIT_SLICE_S))
                 if ready is None:
-                    return None
+                    continue
                 stream = by_handle[id(ready)]
                 self._take(stream)
             except DeviceLost:
                 raise
             except Exception as error:  # OpenNIError: the device failed
                 raise DeviceLost(error_text(error)) from None
+        return None
 
     def _take(self, stream: _Stream) -> None:
         oni_frame = stream.stream.read_frame()

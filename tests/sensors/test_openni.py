@@ -7,6 +7,7 @@ import subprocess
 import sys
 import sysconfig
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -139,6 +140,79 @@ def test_lost_sensor_without_reconnection_raises_one_sentence():
         with pytest.raises(SensorError, match="stopped .*no frame for 0.3 s.*check its cable"):
             for _ in range(5):
                 sensor.read()
+
+
+def _close_later(sensor: OpenNISensor, after_s: float) -> tuple[threading.Thread, list[float]]:
+    """Close the sensor from another thread after a while; the list gets the close's start."""
+    started: list[float] = []
+
+    def close() -> None:
+        time.sleep(after_s)
+        started.append(time.monotonic())
+        sensor.close()
+
+    closer = threading.Thread(target=close, daemon=True)
+    closer.start()
+    return closer, started
+
+
+def test_close_from_another_thread_ends_a_blocked_read_within_a_second():
+    params = OPENNI_PARAMS.create({"color": False, "read_timeout": 5.0})
+    sensor = OpenNISensor("Dummy", params)
+    sensor.read()
+    sensor._streams["depth"].stream.stop()  # no frame comes any more: the read waits
+    closer, started = _close_later(sensor, 0.3)
+    assert sensor.read() is None
+    ended = time.monotonic()
+    closer.join(timeout=5.0)
+    assert not closer.is_alive()
+    assert ended - started[0] < 1.0
+    assert not sensor.is_open
+    assert sensor.read() is None  # closed stays closed: no reopening behind the closer's back
+
+
+def test_close_from_another_thread_ends_reading_every_time():
+    for _ in range(5):
+        sensor = open_sensor("openni://Dummy")
+        sensor.read()
+        closer, started = _close_later(sensor, 0.2)
+        count = 0
+        while sensor.read() is not None:
+            count += 1
+        ended = time.monotonic()
+        closer.join(timeout=5.0)
+        assert not closer.is_alive()
+        assert 2 <= count <= 12  # 30 fps for about 0.2 s
+        assert ended - started[0] < 1.0
+        assert not sensor.is_open and sensor.read() is None
+
+
+def test_process_exits_cleanly_while_another_thread_waits_for_a_frame():
+    # A reading thread is inside OpenNI2's wait when the main thread closes one sensor and
+    # exits with the other still open (the exit hook closes it): exit 0, promptly.
+    code = textwrap.dedent(
+        """
+        import threading, time
+        from optrack.sensors import open_sensor
+        sensors = [open_sensor("openni://Dummy?color=false"), open_sensor("openni://Dummy?id=b")]
+        def read(sensor):
+            while sensor.read() is not None:
+                pass
+        for sensor in sensors:
+            threading.Thread(target=read, args=(sensor,), daemon=True).start()
+        time.sleep(0.3)
+        sensors[0].close()
+        print("closed", flush=True)
+        """
+    )
+    for _ in range(2):
+        started = time.monotonic()
+        done = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, timeout=60
+        )
+        assert done.returncode == 0, done.stderr
+        assert "closed" in done.stdout
+        assert time.monotonic() - started < 20
 
 
 def test_openni_parameters_are_registered():
