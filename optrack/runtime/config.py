@@ -125,7 +125,7 @@ def register_node_stages() -> None:
     import optrack.outputs.streams  # noqa: F401
     import optrack.recording.format  # noqa: F401
     import optrack.runtime.site_params  # noqa: F401
-    import optrack.runtime.skeleton_node  # noqa: F401
+    import optrack.runtime.skeleton_params  # noqa: F401
     import optrack.sensors.openni  # noqa: F401
     import optrack.sensors.playback  # noqa: F401
     import optrack.sensors.realsense  # noqa: F401

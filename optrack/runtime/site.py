@@ -5,10 +5,9 @@ The launcher hosts the site's bus hub (a Zenoh router on
 processes one detector node per sensor and the tracker node, which sends the
 outputs itself, all connecting to the hub. Without ``site.sensors`` the
 sensors are the embedded venue: the simulated ``site.scenario`` (``mixed``:
-three Kinect v2, four to six people) rendered once into a cache (live ray
-casting cannot keep 3 x 30 Hz on a 2-core computer; the rendering's progress
-goes to stderr and to the ``site`` status) and looped forwards and backwards
-by each detector as a live camera, every sensor at the same instant of it.
+three Kinect v2, four to six people), each sensor rendered live by its
+detector node (``sim://``, :func:`optrack.runtime.venue.venue_uris`), every
+one on the same clock, forwards only; nothing is rendered before the start.
 
 It supervises the children: one that stops unexpectedly is reported (on
 stderr and in the ``site`` status on the bus) and restarted after
@@ -43,7 +42,7 @@ from optrack.params import Params, save_config
 from optrack.runtime.config import NodeConfig, state_dir
 from optrack.runtime.display import display_problem
 from optrack.runtime.node import PARENT_ENV
-from optrack.runtime.venue import venue_recording
+from optrack.runtime.venue import venue_uris
 
 __all__ = ["Child", "Site", "SiteError"]
 
@@ -139,9 +138,8 @@ class Site:
         self._run_dir: Path | None = None
         self._standby: subprocess.Popen[bytes] | None = None
         self.operator: Any = None  # the simulated operator (calibration wizard), if simulated
-        self._venue: dict[str, Any] | None = None  # rendering progress, while it lasts
         self._venue_sensors = False  # the sensors are the embedded venue
-        self._next_venue_status = 0.0
+        self._skeleton_wanted = False
         self.playback = None
         if recording is not None:
             from optrack.runtime.node_recording import SitePlayback
@@ -155,37 +153,9 @@ class Site:
         listed = [u.strip() for u in str(self.params.sensors).split(",") if u.strip()]
         if listed:
             return listed
-        path = venue_recording(
-            str(self.params.scenario),
-            int(self.params.seed),
-            float(self.params.venue_seconds),
-            progress=self._rendering,
-        )
-        self._venue = None
+        # Rendered live by each detector node: nothing to render first, forwards only.
         self._venue_sensors = True
-        from optrack.recording import Recording
-
-        # bounce: played forwards then backwards, so nobody jumps when the loop turns
-        return [f"file://{path}?loop=bounce#{sid}" for sid in Recording(path).sensor_ids]
-
-    def _rendering(self, done: int, total: int, rate: float) -> None:
-        """The venue's first rendering, in the site status (at most twice a second); Ctrl-C
-        stops it."""
-        if self._stop.is_set():
-            raise SiteError(
-                "the venue's rendering was stopped before it finished; nothing was cached, "
-                "so the next 'optrack run' renders it again."
-            )
-        now = time.monotonic()
-        self._venue = {
-            "venue.frames_done": done,
-            "venue.frames_total": total,
-            "venue.frames_per_s": round(rate, 2),
-            "venue.eta_s": round((total - done) / rate, 1) if rate > 0 else -1.0,
-        }
-        if done >= total or now >= self._next_venue_status:
-            self._next_venue_status = now + 0.5
-            self.publish_status()
+        return venue_uris(str(self.params.scenario), int(self.params.seed))
 
     def _write_configs(self, run_dir: Path) -> dict[str, Path]:
         """The children's config files: the values the user's file set, the hub to connect
@@ -199,8 +169,10 @@ class Site:
         common.setdefault("node", {})["state_dir"] = str(state_dir(self.config, self.name))
         common["outputs"] = self.config["outputs"].as_dict()
         paths = {}
-        for role in ("detector", "tracker"):
+        for role in ("detector", "tracker", "skeleton"):
             values = {stage: dict(v) for stage, v in common.items()}
+            if role == "skeleton":  # started when the stage is on, at start or later
+                values.setdefault("skeleton_live", {})["enabled"] = True
             if role == "detector":
                 values["node"]["nice"] = int(self.params.detector_nice)
                 if self._venue_sensors and "replay_max_age_s" not in self.config.explicit.get(
@@ -243,8 +215,7 @@ class Site:
             )
         )
         if self.config["skeleton_live"].enabled:
-            args = ["--site", self.name, "--config", str(configs["tracker"])]
-            children.append(Child("skeleton", "skeleton", "optrack.runtime.skeleton_node", args))
+            children.append(self._skeleton_child(configs["skeleton"]))
         if not self.headless:
             problem = display_problem()
             if problem is None:
@@ -255,6 +226,10 @@ class Site:
             else:
                 log.info("no window (%s); running headless.", problem)
         return children
+
+    def _skeleton_child(self, config: Path) -> Child:
+        args = ["--site", self.name, "--config", str(config)]
+        return Child("skeleton", "skeleton", "optrack.runtime.skeleton_node", args)
 
     def _popen(self, argv: list[str], stdin: int) -> subprocess.Popen[bytes]:
         env = dict(os.environ)
@@ -339,6 +314,19 @@ class Site:
     def _on_status(self, message: StatusMessage, key: str) -> None:
         with self._lock:
             self.statuses[message.node] = message
+        if message.role == "detector" and message.params.get("skeleton_live", {}).get("enabled"):
+            self._skeleton_wanted = True  # turned on live: the skeleton node starts
+
+    def _start_skeleton(self) -> None:
+        """Start the skeleton node once a detector runs the skeleton stage (turned on live)."""
+        if not self._skeleton_wanted or self._run_dir is None:
+            return
+        if any(child.role == "skeleton" for child in self.children):
+            return
+        child = self._skeleton_child(self._run_dir / "skeleton.yaml")
+        self.children.append(child)
+        self._spawn(child, standby=True)
+        log.info("the skeleton stage is on: started the skeleton node (pid %s).", child.pid)
 
     # ------------------------------------------------- the simulated operator
     def _attach_operator(self, uris: list[str]) -> None:
@@ -354,7 +342,9 @@ class Site:
 
     # ----------------------------------------------------------- supervision
     def supervise_once(self, now: float) -> None:
-        """Notice ended children, restart the ones due."""
+        """Notice ended children, restart the ones due; start the skeleton node when the
+        skeleton stage was turned on."""
+        self._start_skeleton()
         for child in self.children:
             if child.state == "running" and child.process is not None:
                 code = child.process.poll()
@@ -397,7 +387,7 @@ class Site:
                 self.publish_status()
 
     def status(self) -> StatusMessage:
-        values: dict[str, Any] = dict(self._venue or {})
+        values: dict[str, Any] = {}
         for child in self.children:
             values[f"state.{child.name}"] = child.state
             values[f"pid.{child.name}"] = child.pid or 0
@@ -407,13 +397,7 @@ class Site:
         return StatusMessage(
             node="site",
             role="site",
-            state=(
-                "stopping"
-                if self._stop.is_set()
-                else "rendering"
-                if self._venue is not None
-                else "running"
-            ),
+            state="stopping" if self._stop.is_set() else "running",
             stamp=time.time(),
             values=values,
             counters=self.hub.stats.snapshot() if self.hub is not None else {},
@@ -517,7 +501,7 @@ class Site:
         }
         started = time.monotonic()
         try:
-            self.start()  # the venue's one-time rendering does not count in --seconds
+            self.start()  # starting the nodes does not count in --seconds
             started = time.monotonic()
             deadline = started + self.seconds if self.seconds is not None else None
             report_s = float(self.params.report_s)

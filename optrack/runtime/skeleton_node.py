@@ -5,8 +5,8 @@ off by default, and then nothing below runs). While it is on:
 
 - each detector node crops, after each frame, every person it detected from
   its own depth points (:func:`person_clouds_message`: the person's vertical
-  cylinder, optrack/skeleton/fusion.py, decimated to at most
-  ``skeleton_fusion.points``) and publishes them, float16 around the
+  cylinder, :func:`optrack.skeleton.fusion.person_cloud`, decimated to at
+  most ``skeleton_fusion.points``) and publishes them, float16 around the
   person, on ``person_clouds/<sensor>``;
 - the skeleton node (this module; ``python -m optrack.runtime.skeleton_node
   --site NAME [--config FILE]``, started by ``optrack run`` when the stage
@@ -49,8 +49,9 @@ from optrack.net.messages import (
     SkeletonsMessage,
     TracksMessage,
 )
-from optrack.params import Param, Params, Schema, register
+from optrack.params import Params
 from optrack.runtime.node import Node, RateMeter
+from optrack.runtime.skeleton_params import SKELETON_LIVE_PARAMS
 from optrack.types import Detection, RGBDFrame, Skeleton, SkeletonBatch, TrackBatch
 
 if TYPE_CHECKING:
@@ -67,59 +68,6 @@ __all__ = [
 
 log = logging.getLogger("optrack.runtime.skeleton")
 
-SKELETON_LIVE_PARAMS = register(
-    Schema(
-        "skeleton_live",
-        [
-            Param(
-                "enabled",
-                False,
-                help="Track skeletons: detector nodes publish each person's points and the "
-                "skeleton node fits a body to them (optrack run --skeleton starts it).",
-            ),
-            Param(
-                "gate_m",
-                0.5,
-                min=0.05,
-                max=3.0,
-                step=0.05,
-                unit="m",
-                help="A sensor's person belongs to the nearest track within this distance on "
-                "the floor (else it is left out).",
-            ),
-            Param(
-                "window_s",
-                0.1,
-                min=0.0,
-                max=2.0,
-                step=0.01,
-                unit="s",
-                help="A person's cloud fuses each sensor's newest points no older than this "
-                "before the newest sensor's.",
-            ),
-            Param(
-                "drop_after_s",
-                1.0,
-                min=0.1,
-                max=60.0,
-                step=0.1,
-                unit="s",
-                help="A skeleton whose track is gone, or has had no points, this long is dropped.",
-            ),
-            Param(
-                "max_people",
-                8,
-                min=1,
-                max=100,
-                step=1,
-                help="At most this many skeletons at once (the first tracks seen).",
-            ),
-        ],
-        help="The live skeleton stage: on or off for the site, and how people's points "
-        "from every sensor meet their tracks.",
-    )
-)
-
 
 def person_clouds_message(
     sensor: str,
@@ -132,16 +80,22 @@ def person_clouds_message(
 ) -> PersonCloudsMessage:
     """Each detected person's decimated points from this sensor's frame (world frame,
     float16 around the person), for the skeleton node."""
-    from optrack.skeleton.fusion import crop_person, decimate, world_points
+    from optrack.skeleton.fusion import person_cloud
 
-    points = world_points(frame, world_T_camera, int(fusion.stride))
     floor = np.array([[d.x, d.y] for d in detections], dtype=np.float64).reshape(-1, 2)
-    count = min(int(fusion.points), MAX_PERSON_POINTS)
     clouds = []
     for k, detection in enumerate(detections):
-        others = np.delete(floor, k, axis=0)
-        mine = crop_person(points, floor[k], detection.height, fusion, others)
-        mine = decimate(mine, float(fusion.voxel), count, rng)
+        mine = person_cloud(
+            {sensor: frame},
+            {sensor: world_T_camera},
+            floor[k],
+            detection.height,
+            fusion,
+            rng,
+            others=np.delete(floor, k, axis=0),
+        )
+        if len(mine) > MAX_PERSON_POINTS:  # what one message may carry
+            mine = mine[rng.choice(len(mine), MAX_PERSON_POINTS, replace=False)]
         offsets = (mine - np.array([detection.x, detection.y, 0.0])).astype(np.float16)
         clouds.append(
             PersonCloud(
