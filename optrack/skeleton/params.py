@@ -227,6 +227,25 @@ SKELETON_PARAMS = register(
                 help="Below this share explained (the likelihood collapsed), a frame is a miss.",
             ),
             Param(
+                "shape_seconds",
+                1.0,
+                min=0.0,
+                max=30.0,
+                step=0.1,
+                unit="s",
+                help="A person whose body is not given has their limb lengths and radii estimated "
+                "from this long of tracking, starting from their height (0: never).",
+            ),
+            Param(
+                "shape_frames",
+                3,
+                min=1,
+                max=20,
+                step=1,
+                help="Frames, spread over shape_seconds, the body's estimate fits (each costs about "
+                "half a second, once per person).",
+            ),
+            Param(
                 "lost_frames",
                 5,
                 min=1,

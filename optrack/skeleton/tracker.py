@@ -15,6 +15,13 @@ joints of optrack/skeleton/joints.py, a confidence per joint, and a state:
 A joint's confidence is the support of the areas of interest next to it
 (how many of the points they should hold they hold, capped at 1), times the
 share of the cloud the pose explains.
+
+A tracker not given the person's body starts from the average body of the
+height their first cloud shows; once tracking, it keeps ``shape_frames``
+clouds and poses spread over ``shape_seconds`` and then estimates the
+person's own limb lengths and radii from them (optrack/skeleton/shape.py),
+once, and tracks on with that body (kept through a loss: it is the same
+person).
 """
 
 from __future__ import annotations
@@ -30,6 +37,7 @@ from optrack.skeleton.init import height_from_cloud, initialise
 from optrack.skeleton.joints import JOINTS
 from optrack.skeleton.model import PARTS, BodyShape, forward_kinematics
 from optrack.skeleton.params import SKELETON_PARAMS
+from optrack.skeleton.shape import estimate_shape
 
 __all__ = ["SkeletonEstimate", "SkeletonTracker", "State"]
 
@@ -69,6 +77,9 @@ class SkeletonTracker:
     ) -> None:
         self.params = params if params is not None else SKELETON_PARAMS.create()
         self.shape = shape
+        # The body is estimated once when not given: the clouds and poses it is fitted to.
+        self.shape_estimated = shape is not None
+        self._samples: list[tuple[float, np.ndarray, np.ndarray]] = []
         self._seed = seed
         self.filter: SkeletonFilter | None = None
         self.state: State = "initialising"
@@ -94,9 +105,29 @@ class SkeletonTracker:
         self._misses = 0
         if explained >= float(p.track_fraction):
             self.state = "tracking"
+            self._sample_shape(points, float(stamp))
         elif self.state != "tracking":
             self.state = "initialising"
         return self._estimate(float(stamp), explained, support)
+
+    def _sample_shape(self, points: np.ndarray, stamp: float) -> None:
+        """Keep a tracked frame for the body's estimate; estimate it once there are enough."""
+        p = self.params
+        seconds, frames = float(p.shape_seconds), int(p.shape_frames)
+        if self.shape_estimated or seconds <= 0.0:
+            return
+        spacing = seconds / max(frames - 1, 1)
+        if self._samples and stamp - self._samples[-1][0] < spacing * 0.999:
+            return
+        self._samples.append((stamp, points, self.filter.estimate.copy()))
+        if len(self._samples) < frames:
+            return
+        clouds = [cloud for _, cloud, _ in self._samples]
+        poses = [pose for _, _, pose in self._samples]
+        self.shape, refit = estimate_shape(clouds, poses, self.shape, p, self._seed or 0)
+        self.shape_estimated, self._samples = True, []
+        self.filter = SkeletonFilter(self.shape, p, self._seed)
+        self.filter.reset(refit[-1])
 
     def _start(self, points: np.ndarray) -> None:
         if self.shape is None:

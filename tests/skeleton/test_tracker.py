@@ -100,3 +100,36 @@ def test_shape_estimate_moves_towards_the_persons_own_body():
     assert abs(radius - 1.25) < abs(1.0 - 1.25) / 2  # more than half way to the thicker limbs
     assert estimate.thigh / SHAPE.thigh == pytest.approx(1.0, abs=0.05)  # the rest as it was
     assert estimate.lower_trunk / SHAPE.lower_trunk == pytest.approx(1.0, abs=0.05)
+
+
+def test_tracker_estimates_the_persons_body_from_its_first_frames():
+    rng = np.random.default_rng(8)
+    own = SHAPE.scaled(arms=1.12, limb_radius=1.25)
+    truth = standing(rng, 0.8)
+    params = SKELETON_PARAMS.create({"shape_seconds": 0.1, "shape_frames": 3})
+    tracker = SkeletonTracker(params, seed=0)
+    estimated = []
+    for t in range(7):
+        estimate = tracker.update(seen_cloud(truth, own, rng), t / 30)
+        estimated.append(tracker.shape_estimated)
+    assert estimated == [False] * 4 + [True] * 3  # from frames 0, 2 and 4 (0.1 s)
+    assert estimate.state == "tracking"
+    average = BodyShape.from_height(tracker.shape.height)
+    arms = tracker.shape.upper_arm  # the person's own: 1.12 times SHAPE's
+    assert arms == pytest.approx(1.12 * SHAPE.upper_arm, rel=0.04)
+    assert arms / average.upper_arm > 1.08  # longer than the height alone says
+    assert tracker.shape.radii[3][0] / average.radii[3][0] > 1.1
+    joints = forward_kinematics(truth, own)[0][: len(JOINTS)]
+    assert np.linalg.norm(estimate.joints - joints, axis=1).mean() < 0.05
+
+
+def test_a_given_body_is_kept_and_no_estimate_runs_when_switched_off():
+    rng = np.random.default_rng(9)
+    truth = standing(rng, 0.3)
+    given = SkeletonTracker(SKELETON_PARAMS.create({"shape_seconds": 0.1}), SHAPE, seed=0)
+    off = SkeletonTracker(SKELETON_PARAMS.create({"shape_seconds": 0.0}), seed=0)
+    for t in range(6):
+        given.update(seen_cloud(truth, SHAPE, rng), t / 30)
+        off.update(seen_cloud(truth, SHAPE, rng), t / 30)
+    assert given.shape is SHAPE
+    assert not off.shape_estimated and off.shape == BodyShape.from_height(off.shape.height)
