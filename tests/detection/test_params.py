@@ -25,7 +25,7 @@ def test_schema_is_registered_with_openptracks_generic_defaults():
 
 @pytest.mark.parametrize(
     ("model", "sampling", "max_distance", "min_confidence"),
-    [("kinect1", 4, 5.0, -3.0), ("kinect2", 2, 10.0, -3.0), ("sr4500", 1, 10.0, -3.25)],
+    [("kinect1", 4, 8.0, -3.0), ("kinect2", 2, 10.0, -3.0), ("sr4500", 1, 10.0, -3.25)],
 )
 def test_sensor_models_get_openptracks_values(model, sampling, max_distance, min_confidence):
     p = detection_params(model)
