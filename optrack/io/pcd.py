@@ -168,8 +168,22 @@ def read_pcd(path: str | os.PathLike[str]) -> PointCloudData:
         points = points.reshape(height, width, 3)
         if colors is not None:
             colors = colors.reshape(height, width, 3)
-    viewpoint = tuple(float(v) for v in header.get("VIEWPOINT", "0 0 0 1 0 0 0").split())
+    viewpoint = _viewpoint(path, header.get("VIEWPOINT", "0 0 0 1 0 0 0"))
     return PointCloudData(points, colors, width, height, viewpoint, data, fields)
+
+
+def _viewpoint(path: Path, text: str) -> tuple[float, ...]:
+    """The header's VIEWPOINT: seven finite numbers tx ty tz qw qx qy qz."""
+    try:
+        values = tuple(float(v) for v in text.split())
+    except ValueError:
+        values = ()
+    if len(values) != 7 or not np.all(np.isfinite(values)):
+        raise PCDError(
+            f"{path} has a malformed VIEWPOINT '{text}' in its header; it must be seven finite "
+            "numbers tx ty tz qw qx qy qz."
+        )
+    return values
 
 
 def write_pcd(

@@ -104,7 +104,12 @@ def test_a_compressed_cloud_claiming_more_than_lzf_can_hold_is_refused(tmp_path)
 
 @pytest.mark.parametrize(
     ("line", "message"),
-    [("WIDTH -5", "malformed WIDTH/HEIGHT"), ("SIZE 4 4", "malformed SIZE/COUNT")],
+    [
+        ("WIDTH -5", "malformed WIDTH/HEIGHT"),
+        ("SIZE 4 4", "malformed SIZE/COUNT"),
+        ("VIEWPOINT 0 0 0 one 0 0 0", "malformed VIEWPOINT '0 0 0 one 0 0 0'"),
+        ("VIEWPOINT 0 0 nan 1 0 0 0", "seven finite numbers"),
+    ],
 )
 def test_malformed_header_numbers_get_one_sentence(tmp_path, line, message):
     lines = {"FIELDS": "x y z", "SIZE": "4 4 4", "TYPE": "F F F", "WIDTH": "3", "HEIGHT": "1"}
