@@ -15,7 +15,6 @@ destination that cannot be used is refused and the running ones are kept.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import sys
 import time
@@ -117,16 +116,14 @@ class OutputsNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m optrack.runtime.outputs_node --site NAME [--config FILE]``."""
-    from optrack.runtime.process import run_outputs_node
+    from optrack.runtime.process import module_main, run_outputs_node
 
-    parser = argparse.ArgumentParser(
-        prog="python -m optrack.runtime.outputs_node",
-        description="Outputs node: tracks from the bus to UDP JSON, OSC and WebSocket.",
+    return module_main(
+        argv,
+        "optrack.runtime.outputs_node",
+        "Outputs node: tracks from the bus to UDP JSON, OSC and WebSocket.",
+        run_outputs_node,
     )
-    parser.add_argument("--site", required=True, help="site name")
-    parser.add_argument("--config", help="YAML configuration")
-    args = parser.parse_args(argv)
-    return run_outputs_node(args.site, args.config)
 
 
 if __name__ == "__main__":

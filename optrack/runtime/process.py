@@ -33,6 +33,7 @@ from optrack.sensors.base import Sensor, SensorError
 __all__ = [
     "detection_params_for",
     "finish",
+    "module_main",
     "nice",
     "open_node_sensor",
     "run_detector_node",
@@ -45,6 +46,19 @@ __all__ = [
 REPLAY_OPTIONS = ("id", "loop", "speed", "realtime", "paused")
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
+
+
+def module_main(
+    argv: list[str] | None, module: str, description: str, run: Callable[[str, str | None], int]
+) -> int:
+    """``python -m MODULE --site NAME [--config FILE]``: a node started as a module."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog=f"python -m {module}", description=description)
+    parser.add_argument("--site", required=True, help="site name")
+    parser.add_argument("--config", help="YAML configuration")
+    args = parser.parse_args(argv)
+    return run(args.site, args.config)
 
 
 def setup_logging(label: str) -> None:

@@ -28,7 +28,6 @@ stops the clouds and the skeletons at once; on again, they resume.
 
 from __future__ import annotations
 
-import argparse
 import collections
 import dataclasses
 import logging
@@ -390,14 +389,14 @@ def run_skeleton_node(site: str, config_path: str | None = None) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m optrack.runtime.skeleton_node --site NAME [--config FILE]``."""
-    parser = argparse.ArgumentParser(
-        prog="python -m optrack.runtime.skeleton_node",
-        description="Skeleton node: people's points from the detectors in, skeletons out.",
+    from optrack.runtime.process import module_main
+
+    return module_main(
+        argv,
+        "optrack.runtime.skeleton_node",
+        "Skeleton node: people's points from the detectors in, skeletons out.",
+        run_skeleton_node,
     )
-    parser.add_argument("--site", required=True, help="site name")
-    parser.add_argument("--config", help="YAML configuration")
-    args = parser.parse_args(argv)
-    return run_skeleton_node(args.site, args.config)
 
 
 if __name__ == "__main__":

@@ -14,7 +14,9 @@ from app.widgets.parameters_panel import ParametersPanel
 from app.widgets.tracks_table import SKELETON_STALE_S, TracksTable
 from app.widgets.world_view import BONES, confidence_color
 from optrack.skeleton.joints import JOINTS
-from optrack.types import Skeleton, SkeletonBatch, Track, TrackBatch, TrackStatus
+from optrack.types import Skeleton, SkeletonBatch
+
+from .test_tracks_views import table_rows, two_people
 
 HEIGHTS = {"head": 1.65, "neck": 1.5, "spine": 1.25, "pelvis": 0.95, "shoulder": 1.45}
 HEIGHTS |= {"elbow": 1.15, "wrist": 0.9, "hip": 0.9, "knee": 0.5, "ankle": 0.1}
@@ -30,39 +32,20 @@ def standing(track_id: int, x: float, y: float, confidence: float = 1.0) -> Skel
     return Skeleton(id=track_id, height=1.7, state="tracking", rate_hz=14.6, joints=joints)
 
 
-def two_tracks() -> TrackBatch:
-    return TrackBatch(
-        stamp=10.0,
-        seq=3,
-        tracks=[
-            Track(7, 1.25, -0.5, 1.72, age=3.5, confidence=0.91, status=TrackStatus.NORMAL),
-            Track(3, -2.0, 2.125, 1.6, age=0.2, confidence=0.4, status=TrackStatus.MISSING),
-        ],
-    )
-
-
-def rows(table: TracksTable) -> list[list[str]]:
-    model = table.model
-    return [
-        [model.index(r, c).data() for c in range(model.columnCount())]
-        for r in range(model.rowCount())
-    ]
-
-
 def test_the_skeleton_column_comes_with_skeletons_and_goes_with_them(qtbot):
     table = TracksTable()
     qtbot.addWidget(table)
-    table.model.set_batch(two_tracks(), now=100.0)
+    table.model.set_batch(two_people(), now=100.0)
     assert table.model.columnCount() == 7  # skeletons off: the table as it always was
     table.model.set_skeletons(SkeletonBatch(stamp=10.0, skeletons=[standing(7, 1.25, -0.5)]), 100.0)
     assert table.model.columnCount() == 8
     assert table.model.headerData(7, Qt.Orientation.Horizontal, 0) == "skeleton"
-    assert [row[-1] for row in rows(table)] == ["", "tracking 15 Hz"]  # track 3 has none
-    table.model.set_batch(two_tracks(), now=100.0 + SKELETON_STALE_S / 2)
+    assert [row[-1] for row in table_rows(table)] == ["", "tracking 15 Hz"]  # track 3 has none
+    table.model.set_batch(two_people(), now=100.0 + SKELETON_STALE_S / 2)
     assert table.model.columnCount() == 8
-    table.model.set_batch(two_tracks(), now=100.0 + SKELETON_STALE_S * 2)
+    table.model.set_batch(two_people(), now=100.0 + SKELETON_STALE_S * 2)
     assert table.model.columnCount() == 7  # the stage was turned off
-    assert rows(table)[1] == ["7", "1.25", "-0.50", "1.72", "3.5", "0.91", "normal"]
+    assert table_rows(table)[1] == ["7", "1.25", "-0.50", "1.72", "3.5", "0.91", "normal"]
 
 
 def test_the_skeleton_stages_build_pages_in_the_parameters_dock(qtbot):
