@@ -20,7 +20,7 @@ SITE_PARAMS = register(
             Param(
                 "scenario",
                 "mixed",
-                help="Embedded venue: the simulated scenario rendered once and looped.",
+                help="Embedded venue: the simulated scenario, each sensor rendered live by its detector.",
             ),
             Param("seed", 0, min=0, max=2**31 - 1, step=1, help="Embedded venue: random seed."),
             Param(
@@ -30,8 +30,8 @@ SITE_PARAMS = register(
                 max=600.0,
                 step=1.0,
                 unit="s",
-                help="Embedded venue: length of the rendered recording (rendered once, then cached; "
-                "played forwards and backwards, so the loop lasts twice this).",
+                help="Recorded venue (optrack bench e2e): length of the rendered recording (rendered "
+                "once, then cached).",
             ),
             Param(
                 "venue_max_age_s",

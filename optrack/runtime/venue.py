@@ -1,10 +1,16 @@
-"""The embedded venue: a simulated site rendered once into a recording, then reused.
+"""The embedded venue: a simulated site for ``optrack run`` without ``site.sensors``.
 
-``optrack run`` without ``site.sensors`` plays this recording through its
-detector nodes as live cameras (live ray casting cannot keep 3 x 30 Hz on a
-2-core computer). The rendering's progress goes to stderr and to a callback
-(the site shows it in its status); the result is cached per scenario, seed,
-length, optrack version and format.
+:func:`venue_uris` is what ``optrack run`` plays: each detector node renders its own
+sensor of the simulated scenario live (``sim://``), every one on the same clock, so the
+first tracks come as soon as the nodes are up, with nothing to render first and nothing
+cached; people walk forwards only, and the venue starts again from its beginning every
+``LIVE_LOOP_S``. A node renders at the rate its CPU share allows (a camera that drops
+frames), about 80 % of what a cached replay reached on 2 cores.
+
+:func:`venue_recording` renders the same venue once into a recording and caches it (per
+scenario, seed, length, optrack version and format) for what needs the exact same
+frames every time (``optrack bench e2e``, tests); :func:`clean_stale_venues` keeps that
+cache small.
 """
 
 from __future__ import annotations
@@ -16,8 +22,16 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from urllib.parse import quote
 
-__all__ = ["VENUE_FORMAT", "VenueProgress", "clean_stale_venues", "venue_recording"]
+__all__ = [
+    "LIVE_LOOP_S",
+    "VENUE_FORMAT",
+    "VenueProgress",
+    "clean_stale_venues",
+    "venue_recording",
+    "venue_uris",
+]
 
 log = logging.getLogger("optrack.runtime.site")
 
@@ -25,6 +39,31 @@ log = logging.getLogger("optrack.runtime.site")
 def _cache_root() -> Path:
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "optrack" / "venues"
+
+
+#: The live venue's loop: its people walk forwards for this long, then it starts again. A
+#: node that starts late (a restart) steps the crowd up to now first, which costs about
+#: 2 % of the time it catches up; a loop this long keeps that to seconds.
+LIVE_LOOP_S = 300.0
+
+
+def venue_uris(scenario: str, seed: int, start: float | None = None) -> list[str]:
+    """The embedded venue's sensors, live: one ``sim://`` URI per sensor of ``scenario``,
+    all on the clock that starts at ``start`` (now by default), looping forwards. Stale
+    cached venues go (:func:`clean_stale_venues`)."""
+    from optrack import __version__
+    from optrack.sim.world import Simulation
+
+    root = _cache_root()
+    if root.is_dir():
+        clean_stale_venues(root, suffix=f"-v{__version__}-png{VENUE_FORMAT['png_compression']}")
+    ids = [sensor.id for sensor in Simulation(scenario, seed=seed, seconds=LIVE_LOOP_S).sensors]
+    path = Path(scenario)
+    if path.suffix.lower() in (".yaml", ".yml"):  # a file: sim:///abs/path.yaml/N
+        scenario = str(path.resolve())
+    begin = time.time() if start is None else start
+    query = f"seed={seed}&seconds={LIVE_LOOP_S:g}&start={begin!r}&loop=true"
+    return [f"sim://{quote(scenario)}/{k}?{query}&id={quote(sid)}" for k, sid in enumerate(ids)]
 
 
 #: How the embedded venue is cached: depth (and infrared) as PNG without deflate, colour as

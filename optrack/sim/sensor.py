@@ -13,8 +13,10 @@ The one thing a camera cannot do: :meth:`SimulatedSensor.truth` gives the
 ground truth at the last frame's capture time.
 
 URI: ``sim://SCENARIO/N?seed=0&people=5&sensors=3&model=kinect1&seconds=60
-&realtime=false&noise=false&start=1700000000.0&id=cam0&hold=5`` (all optional; ``hold``:
-seconds the board operator holds the board still at each place);
+&realtime=false&noise=false&start=1700000000.0&id=cam0&hold=5&loop=true`` (all optional;
+``hold``: seconds the board operator holds the board still at each place; ``loop``: at
+the end of ``seconds`` the venue starts again from its beginning, on every sensor that
+shares ``start`` at the same instant);
 ``sim:///abs/path/scenario.yaml/N`` for a scenario file. Importing this module
 registers the scheme with :func:`optrack.sensors.uri.register_scheme`, so that
 :func:`optrack.sensors.open_sensor` opens ``sim://`` URIs from then on.
@@ -72,8 +74,9 @@ class SimulatedSensor(Sensor):
         sensor_id: str | None = None,
         uri: str = "",
         clock: object = time,
+        loop: bool = False,
     ) -> None:
-        self.simulation = Simulation(
+        self._make = lambda: Simulation(
             scenario,
             seed=seed,
             people=people,
@@ -82,6 +85,10 @@ class SimulatedSensor(Sensor):
             seconds=seconds,
             params=_operator_params(hold_seconds),
         )
+        self.simulation = self._make()
+        if loop and not real_time:
+            raise SensorError("a simulated sensor loops in real time only (realtime=true).")
+        self.loop = loop
         count = len(self.simulation.sensors)
         if not 0 <= index < count:
             raise SensorError(
@@ -130,6 +137,7 @@ class SimulatedSensor(Sensor):
             "noise",
             "start",
             "id",
+            "loop",
         }
         unknown = sorted(set(options) - known)
         if unknown:
@@ -176,6 +184,7 @@ class SimulatedSensor(Sensor):
             start_time=number_of("start", float),
             sensor_id=options.get("id") or None,
             uri=text,
+            loop=flag("loop", False),
         )
 
     # ----------------------------------------------------------- interface
@@ -211,6 +220,12 @@ class SimulatedSensor(Sensor):
             due = math.floor((elapsed - sensor.phase) * sensor.model.fps + 1e-9)
             self._next = max(self._next, min(due, self._count))
         n = self._next
+        if n >= self._count and self.loop:
+            # Again from the beginning: the same venue, a loop later on the clock.
+            self._epoch += self.simulation.seconds
+            self.simulation, self._next = self._make(), 0
+            self._sensor = self.simulation.sensors[self.index]
+            return self.read()
         if n >= self._count:
             return None
         t = sensor.frame_time(n)

@@ -1,64 +1,37 @@
-"""The embedded venue's first rendering: progress on stderr and in the site status, then
-the cache reused; the sensors play it back and forth."""
+"""The embedded venue starts at once: each detector node renders its sensor live, all
+on one clock, forwards, looping; nothing is rendered first and nothing is cached."""
 
 from __future__ import annotations
 
-import threading
 import time
+import urllib.parse
 
-from optrack.net.bus import Bus
-from optrack.net.config import BUS_PARAMS
-from optrack.net.messages import StatusMessage
 from optrack.runtime.config import load_node_config
-from optrack.runtime.process import setup_logging
 from optrack.runtime.site import Site
+from optrack.runtime.venue import LIVE_LOOP_S, venue_uris
+from optrack.sim.sensor import SimulatedSensor
 
-from .conftest import free_port
 
-
-def test_the_first_run_shows_the_venue_rendering_on_stderr_and_in_the_site_status(
-    tmp_path, monkeypatch, capfd
-):
+def test_the_site_without_sensors_plays_the_live_venue_at_once(tmp_path, monkeypatch, capfd):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
-    setup_logging("optrack run")  # as the command does: one line per message on stderr
-    port = free_port()
-    config = load_node_config(
-        None, {"bus": {"local_port": port}, "site": {"name": "render", "venue_seconds": 1.0}}
-    )
-    site = Site(config)
-    site.host()
-    observer = Bus("render", "gui", BUS_PARAMS.create({"local_port": port}))
-    seen: list[StatusMessage] = []
-    lock = threading.Lock()
+    site = Site(load_node_config(None, {"site": {"name": "live"}}))
+    started = time.perf_counter()
+    uris = site.sensor_uris()
+    assert time.perf_counter() - started < 5.0  # no rendering before the start
+    assert not (tmp_path / "cache").exists()  # nothing cached
+    assert "rendering" not in capfd.readouterr().err
+    assert site.status().state == "running"
+    assert [urllib.parse.urlsplit(u).netloc for u in uris] == ["mixed"] * 3
+    queries = [dict(urllib.parse.parse_qsl(urllib.parse.urlsplit(u).query)) for u in uris]
+    assert [q["id"] for q in queries] == ["kinect2_0", "kinect2_1", "kinect2_2"]
+    assert len({q["start"] for q in queries}) == 1  # one clock for every sensor
+    assert all(q["loop"] == "true" and float(q["seconds"]) == LIVE_LOOP_S for q in queries)
 
-    def on_status(message: StatusMessage, key: str) -> None:
-        with lock:
-            seen.append(message)
 
-    try:
-        observer.subscribe(observer.keys.status("site"), StatusMessage, on_status)
-        uris = site.sensor_uris()
-        deadline = time.monotonic() + 10.0
-        while time.monotonic() < deadline:  # the bus delivers asynchronously
-            site.publish_status()
-            time.sleep(0.2)
-            with lock:
-                if seen and seen[-1].state != "rendering":
-                    break
-        observer.close()
-    finally:
-        site.stop()
-    rendering = [m for m in seen if m.state == "rendering"]
-    assert rendering, [m.state for m in seen]
-    done = [int(m.values["venue.frames_done"]) for m in rendering]
-    total = int(rendering[-1].values["venue.frames_total"])
-    assert done == sorted(done) and done[-1] == total == 90  # 3 sensors x 30 Hz x 1 s
-    assert float(rendering[-1].values["venue.frames_per_s"]) > 0
-    assert seen[-1].state != "rendering" and "venue.frames_done" not in seen[-1].values
-    err = capfd.readouterr().err
-    assert "rendering the venue 'mixed' once" in err and "90/90 frames" in err
-    assert len(uris) == 3 and all("loop=bounce" in u for u in uris)
-    # The second run reuses the cache: nothing rendered.
-    again = Site(load_node_config(None, {"site": {"venue_seconds": 1.0}}))
-    assert again.sensor_uris() == uris
-    assert "rendering the venue" not in capfd.readouterr().err
+def test_the_venue_uris_open_as_live_sensors_of_one_venue() -> None:
+    start = time.time()
+    uris = venue_uris("mixed", 4, start=start)
+    sensors = [SimulatedSensor.from_uri(u) for u in uris]
+    assert [s.info.id for s in sensors] == ["kinect2_0", "kinect2_1", "kinect2_2"]
+    assert all(s.loop and s.real_time and s.start_time == start for s in sensors)
+    assert len({s.simulation.seed for s in sensors}) == 1
