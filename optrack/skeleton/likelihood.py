@@ -133,7 +133,7 @@ def _first_at_least(key, value: float) -> int:
 
 
 @numba.njit(fastmath=True, inline="always")
-def likelihood_pose(px, py, pz, axis, baseline, geometry, expected, consts):
+def likelihood_pose(px, py, pz, axis, baseline, geometry, expected, consts, best, area, counts):
     """Eq. 9 for one pose, geometry (K, G), of a cloud from :func:`sorted_points`
     (sorted along ``axis``): each part visits only the run of points that can lie within
     alpha of it. consts: 1 / (2 sigma^2), alpha, support_weight. Inlined where it is
@@ -141,8 +141,8 @@ def likelihood_pose(px, py, pz, axis, baseline, geometry, expected, consts):
     inv_two_sigma2, alpha, weight = consts[0], np.float32(consts[1]), consts[2]
     n = px.shape[0]
     key = (px, py, pz)[axis]
-    best = baseline.copy()
-    area = np.full(n, -1, dtype=np.int32)
+    best[:] = baseline
+    area[:] = -1
     for k in range(geometry.shape[0]):
         g = geometry[k]
         ax, ay, az, ux, uy, uz = g[0], g[1], g[2], g[3], g[4], g[5]
@@ -167,7 +167,7 @@ def likelihood_pose(px, py, pz, axis, baseline, geometry, expected, consts):
             qb[i] = d if better else qb[i]
             qa[i] = (far if s >= half else near) if better else qa[i]
     total = 0.0
-    counts = np.zeros(2 * geometry.shape[0])
+    counts[:] = 0.0
     for i in range(n):
         b = min(best[i], alpha)
         total += b * b
@@ -182,8 +182,14 @@ def likelihood_pose(px, py, pz, axis, baseline, geometry, expected, consts):
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
 def _kernel(px, py, pz, axis, baseline, geometry, expected, consts, out):
-    for p in numba.prange(geometry.shape[0]):
-        out[p] = likelihood_pose(px, py, pz, axis, baseline, geometry[p], expected, consts)
+    n, chunks = geometry.shape[0], min(geometry.shape[0], 64)
+    for c in numba.prange(chunks):  # scratch once per chunk of poses
+        best, area = np.empty_like(baseline), np.empty(baseline.shape[0], dtype=np.int32)
+        counts = np.empty(2 * geometry.shape[1])
+        for p in range(c * n // chunks, (c + 1) * n // chunks):
+            out[p] = likelihood_pose(
+                px, py, pz, axis, baseline, geometry[p], expected, consts, best, area, counts
+            )
 
 
 def sorted_points(points: np.ndarray, baseline: np.ndarray | None) -> tuple:

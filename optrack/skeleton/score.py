@@ -40,6 +40,8 @@ def _score_kernel(
         x, cos_x, sin_x = estimate.copy(), cos_e.copy(), sin_e.copy()
         rot, pts = base_rot.copy(), base_pts.copy()
         geometry = np.empty((parts.shape[0], G), dtype=np.float32)
+        best, area = np.empty_like(baseline), np.empty(baseline.shape[0], dtype=np.int32)
+        counts = np.empty(2 * parts.shape[0])
         for p in range(c * n // chunks, (c + 1) * n // chunks):
             for d in range(x.shape[0]):
                 if mask[d]:
@@ -48,7 +50,9 @@ def _score_kernel(
                     cos_x[d], sin_x[d] = np.cos(angle), np.sin(angle)
             fk_pose(x, cos_x, sin_x, offsets, chosen, rot, pts, *fk_tables)
             geometry_pose(pts, rot, parts, *part_tables, radii, geometry)
-            out[p] = likelihood_pose(px, py, pz, axis, baseline, geometry, expected, consts)
+            out[p] = likelihood_pose(
+                px, py, pz, axis, baseline, geometry, expected, consts, best, area, counts
+            )
 
 
 def score_particles(
