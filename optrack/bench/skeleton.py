@@ -20,7 +20,9 @@ and a digest of the simulator's code).
   ``fps_4people_3sensors`` per person with four performers; both leave out
   each run's first frame (initialisation, and numba's compilation);
   ``ms_per_frame_p50``/``_p95`` are of one person's frames with three
-  sensors. The machine's load average is reported beside them.
+  sensors (wall time), ``cpu_ms_per_frame_p50`` the CPU time of those frames
+  (every thread's): on a loaded machine the better guide. The machine's load
+  average is reported beside them.
 """
 
 from __future__ import annotations
@@ -136,12 +138,14 @@ def skeleton_bench(
     alone = runs[Path(clips[0]).stem]["3_sensors"]
     crowd = _recording([folder / c for c in SPEED_CLIPS], 4, speed_seconds, area=False)
     four = _run(crowd, 3, "four people")
-    steady = alone.frame_ms[1:] if len(alone.frame_ms) > 1 else alone.frame_ms
+    skip = 1 if len(alone.frame_ms) > 1 else 0
+    steady, cpu = alone.frame_ms[skip:], alone.frame_cpu_ms[skip:]
     return {
         "fps_1person_3sensors": alone.speed(1),
         "fps_4people_3sensors": four.speed(1),
         "ms_per_frame_p50": round(float(np.percentile(steady, 50)), 1),
         "ms_per_frame_p95": round(float(np.percentile(steady, 95)), 1),
+        "cpu_ms_per_frame_p50": round(float(np.percentile(cpu, 50)), 1),
         "particles": int(SKELETON_PARAMS.create().particles),
         "points_per_person": int(FUSION_PARAMS.create().points),
         "points_per_person_mean": round(float(np.mean(alone.points)), 1),

@@ -86,12 +86,13 @@ def score_markers(errors: np.ndarray) -> dict[str, Any]:
 @dataclasses.dataclass
 class SkeletonRun:
     """What a run of the skeleton over a recording gives: each person-frame's marker errors
-    (F, len(MARKERS)) and cloud size (F,); each skeleton frame's time (ms, all its people)
-    and number of people."""
+    (F, len(MARKERS)) and cloud size (F,); each skeleton frame's wall and CPU time (ms, all
+    its people, the CPU time of every thread of the process) and number of people."""
 
     errors: np.ndarray
     points: np.ndarray
     frame_ms: np.ndarray
+    frame_cpu_ms: np.ndarray
     frame_people: np.ndarray
     people: int
     sensors: list[str]
@@ -171,12 +172,13 @@ def run_skeleton(
     errors: list[np.ndarray] = []
     points: list[int] = []
     frame_ms: list[float] = []
+    frame_cpu_ms: list[float] = []
     frame_people: list[int] = []
     reference = frames.stamps[sensors[0]]
     for k, t in enumerate(reference):
         depth = frames.depth_at(float(t))
         people = _people(instants[int(np.argmin(np.abs(truth_times - t)))])
-        started = time.perf_counter()
+        started, cpu = time.perf_counter(), time.process_time()
         for pid, (xy, height, markers) in people.items():
             others = [p[0] for q, p in people.items() if q != pid]
             cloud = person_cloud(depth, poses, xy, height, fusion, rng, others)
@@ -186,6 +188,7 @@ def run_skeleton(
             points.append(len(cloud))
             errors.append(marker_errors(markers, estimate.joints[_MARKER_INDEX])[0])
         frame_ms.append((time.perf_counter() - started) * 1000.0)
+        frame_cpu_ms.append((time.process_time() - cpu) * 1000.0)
         frame_people.append(len(people))
         if progress and ((k + 1) % 10 == 0 or k + 1 == len(reference)):
             print(f"\reval: skeleton frame {k + 1}/{len(reference)}", end="", file=sys.stderr)
@@ -196,6 +199,7 @@ def run_skeleton(
         shaped,
         np.array(points),
         np.array(frame_ms),
+        np.array(frame_cpu_ms),
         np.array(frame_people),
         len(trackers),
         sensors,

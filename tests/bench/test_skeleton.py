@@ -27,7 +27,12 @@ def test_bench_skeleton_keys_on_a_few_frames(shared_data, tmp_path, monkeypatch)
     result = skeleton_bench(seconds=0.2, clips=(clip,), speed_seconds=0.1)
     assert KEYS <= set(result)
     assert result["particles"] == 2000 and result["points_per_person"] == 500
-    for key in ("fps_1person_3sensors", "fps_4people_3sensors", "ms_per_frame_p50"):
+    for key in (
+        "fps_1person_3sensors",
+        "fps_4people_3sensors",
+        "ms_per_frame_p50",
+        "cpu_ms_per_frame_p50",
+    ):
         assert math.isfinite(result[key]) and result[key] > 0
     assert result["ms_per_frame_p95"] >= result["ms_per_frame_p50"]
     assert set(result["accuracy"]) == {"3_sensors", "2_sensors", "1_sensor"}
