@@ -10,6 +10,7 @@ places spread over its image, turned a different way each time.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 
 import numpy as np
@@ -45,6 +46,7 @@ class BoardStep:
     operator_spot: np.ndarray
     operator_heading: float
     sensors: tuple[int, ...]
+    square_px: float = 0.0  # the smallest square side the sensors see, pixels (held boards)
 
 
 @dataclasses.dataclass
@@ -115,6 +117,12 @@ def _square_pixels(
     return np.where(ok, per_square, 0.0)
 
 
+def _sight_points(board: PhysicalBoard) -> np.ndarray:
+    """The board points whose lines of sight are checked (board frame): the outline and
+    every inner corner, so a pillar in front of the middle of the pattern hides it too."""
+    return np.concatenate([board.outline, board.pattern.object_points])
+
+
 def _line_of_sight(
     scene: o3d.t.geometry.RaycastingScene, views: list[SensorView], points: np.ndarray
 ) -> bool:
@@ -173,7 +181,8 @@ def plan_board_steps(
     params: Params | None = None,
     body_radius: float = 0.25,
 ) -> list[BoardStep]:
-    """Board placements: one per sensor, one per neighbouring pair, then up to
+    """Board placements: one per sensor, then pairs of sensors (see :func:`_pair_steps`:
+    every sensor shares a view with the others wherever their views overlap), then up to
     ``spec.floor_placements`` on the floor. A placement no spot satisfies is skipped.
     With ``spec.intrinsics_sensor`` set: :func:`plan_intrinsics_steps` for that sensor."""
     params = params if params is not None else BOARD_PARAMS.create()
@@ -185,10 +194,38 @@ def plan_board_steps(
         views, venue, static_scene, PhysicalBoard.from_spec(spec, params), params, body_radius
     )
     grid, centers = _hold_places(venue, params)
-    # Held upright, facing one sensor or between two.
-    subsets: list[tuple[int, ...]] = [(i,) for i in range(len(views))] + neighbouring_pairs(views)
-    steps = [step for subset in subsets if (step := _held_step(room, subset, centers))]
-    return steps + _floor_steps(room, grid, spec.floor_placements)
+    # Held upright, facing one sensor, then between two.
+    steps = [step for i in range(len(views)) if (step := _held_step(room, (i,), centers))]
+    return steps + _pair_steps(room, centers) + _floor_steps(room, grid, spec.floor_placements)
+
+
+def _pair_steps(room: _Room, centers: np.ndarray) -> list[BoardStep]:
+    """Held placements seen by two sensors at once: every neighbouring pair (by bearing)
+    whose views overlap, and the pairs of a spanning tree of the sensors that see the
+    board sharpest (Kruskal over every pair's best placement, largest squares first), so
+    that every sensor shares a view with the others whenever some chain of overlaps joins
+    it to them, whatever the layout."""
+    found = {
+        pair: step
+        for pair in itertools.combinations(range(len(room.views)), 2)
+        if (step := _held_step(room, pair, centers)) is not None
+    }
+    chosen = [pair for pair in neighbouring_pairs(room.views) if pair in found]
+    group = list(range(len(room.views)))
+
+    def root(i: int) -> int:
+        while group[i] != i:
+            i = group[i]
+        return i
+
+    for pair in chosen:
+        group[root(pair[0])] = root(pair[1])
+    for pair in sorted(found, key=lambda p: -found[p].square_px):
+        a, b = root(pair[0]), root(pair[1])
+        if a != b:
+            group[a] = b
+            chosen.append(pair)
+    return [found[pair] for pair in chosen]
 
 
 def _held_step(room: _Room, subset: tuple[int, ...], centers: np.ndarray) -> BoardStep | None:
@@ -219,13 +256,15 @@ def _held_step(room: _Room, subset: tuple[int, ...], centers: np.ndarray) -> Boa
     score = np.minimum(sizes, params.square_px_wanted).min(axis=0) / params.square_px_wanted
     score -= params.height_preference * np.abs(centers[:, 2] - params.carry_height)
     score[~usable | (sizes.min(axis=0) <= 0)] = -np.inf
+    sight = _sight_points(board)
     for best in np.argsort(-score):
         if not np.isfinite(score[best]):
             break
         pose = make_pose(rotations[best], centers[best] - rotations[best] @ board.center)
-        if _line_of_sight(room.scene, chosen, transform_points(pose, board.outline)):
+        if _line_of_sight(room.scene, chosen, transform_points(pose, sight)):
             heading = math.atan2(horizontal[best, 1], horizontal[best, 0])
-            return BoardStep("hold", pose, spots[best], heading, subset)
+            smallest = float(sizes[:, best].min())
+            return BoardStep("hold", pose, spots[best], heading, subset, smallest)
     return None
 
 
@@ -272,10 +311,8 @@ def _floor_step(
 ) -> BoardStep | None:
     """The board lying at ``xy`` (``pose``): the ``candidates`` sensors that see it past
     the venue, and a spot beside it for the operator; None without either."""
-    outline = transform_points(pose, room.board.outline)
-    seeing = tuple(
-        int(k) for k in candidates if _line_of_sight(room.scene, [room.views[k]], outline)
-    )
+    sight = transform_points(pose, _sight_points(room.board))
+    seeing = tuple(int(k) for k in candidates if _line_of_sight(room.scene, [room.views[k]], sight))
     if not seeing:
         return None
     spot = _step_aside(
@@ -356,7 +393,9 @@ def plan_intrinsics_steps(
         for c in order:
             open_[c] = False
             pose = make_pose(rotations[c], centers_a[c] - rotations[c] @ board.center)
-            if not _line_of_sight(static_scene, [view], transform_points(pose, board.outline)):
+            if not _line_of_sight(
+                static_scene, [view], transform_points(pose, _sight_points(board))
+            ):
                 continue
             bearing = math.atan2(horizontal[c, 1], horizontal[c, 0])
             steps.append(BoardStep("hold", pose, spots[c], bearing, (index,)))

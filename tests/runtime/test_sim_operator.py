@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 
+from optrack.net.bus import Bus
 from optrack.runtime.config import NODE_PARAMS
 from optrack.runtime.node import CommandError, Node, send_command
 from optrack.runtime.site_params import SITE_PARAMS
@@ -147,3 +148,127 @@ def test_the_simulated_operator_carries_the_sites_board_and_needs_one(tmp_path):
         time.sleep(0.05)
     board = yaml.safe_load(scene.read_text())["board"]
     assert (board["cols"], board["rows"], board["square"]) == (8, 5, 0.15)
+
+
+def _site_config(folder, name: str, sensors: str) -> str:
+    """A site config on a free port; no ``sensors``: the embedded venue (``make run``)."""
+    import yaml
+
+    from .conftest import free_port
+
+    config = folder / f"{name}.yaml"
+    site = {"name": name, "report_s": 10.0, **({"sensors": sensors} if sensors else {})}
+    config.write_text(
+        yaml.safe_dump(
+            {
+                "bus": {"local_port": free_port(), "connect_timeout_s": 30.0},
+                "site": site,
+                "node": {"state_dir": str(folder / "state"), "status_period_s": 0.5},
+            }
+        )
+    )
+    return str(config)
+
+
+def _live_calibration(config: str, count: int):
+    """The wizard's backend joined to the site of ``config`` once its ``count`` detector
+    nodes answer."""
+    from optrack.calibration.board import Checkerboard
+    from optrack.errors import UserError
+    from optrack.params import load_config
+    from optrack.runtime.calibration_live import LiveCalibration
+
+    loaded = load_config(config)
+    bus = Bus(str(loaded["site"].name), "wizard", loaded["bus"])
+    deadline = time.monotonic() + 120
+    while True:
+        try:
+            live = LiveCalibration(bus, Checkerboard(6, 5, 0.15))
+            if len(live.sensors) == count:
+                return bus, live
+            live.close()
+        except UserError:
+            if time.monotonic() > deadline:
+                bus.close()
+                raise
+        time.sleep(0.5)
+
+
+SITES = {
+    # make run: the embedded venue, three simulated Kinect v2 far apart in a 9x7 m room
+    "default": ("mixed", 3, None),
+    # sim:// sensors of a scenario (its first N; a mixed scenario's plays long enough)
+    "two": ("calibration", 2, ""),
+    "four": ("mixed", 4, "&seconds=900"),
+}
+
+
+@pytest.mark.parametrize("site", sorted(SITES))
+def test_the_headless_wizard_calibrates_every_camera_of_a_simulated_site(site, processes, tmp_path):
+    """`optrack calibrate live`'s backend against a running site whose simulated operator
+    plans its board from the sensors' views: every sensor shares views with a calibrated
+    one, and every camera ends within 2 cm and 0.3 degrees of the simulation's truth."""
+    from optrack.calibration.files import load_calibration
+    from optrack.calibration.quality import calibration_errors
+    from optrack.runtime.calibration_headless import HeadlessPlan, calibrate_headless
+
+    scenario, count, options = SITES[site]
+    truth = {s.id: s.world_T_camera for s in Simulation(scenario, people=0, sensors=count).sensors}
+    uris = [
+        f"sim://{scenario}/{k}?sensors={count}{options}&id={name}" for k, name in enumerate(truth)
+    ]
+    config = _site_config(tmp_path, site, "" if options is None else ",".join(uris))
+    processes.start(
+        ["optrack.cli", "run", "--headless", "--seconds", "600", "--config", config], site
+    )
+    bus, live = _live_calibration(config, count)
+    said: list[str] = []
+    try:
+        plan = HeadlessPlan(out=str(tmp_path / "network.yaml"), extrinsics_s=240.0, publish=False)
+        payload = calibrate_headless(live, plan, said.append)
+    finally:
+        live.close()
+        bus.close()
+    assert payload["uncalibrated"] == [], said[-5:]
+    calibration = load_calibration(payload["out"])
+    assert calibration.world == "floor"
+    assert sorted(calibration.sensors) == sorted(truth)
+    errors = calibration_errors({n: calibration.pose(n) for n in truth}, truth)
+    assert errors.max_position_error_m <= 0.02, errors.as_dict()
+    assert errors.max_rotation_error_deg <= 0.3, errors.as_dict()
+
+
+@pytest.mark.parametrize(
+    ("scenario", "count"), [("mixed", 3), ("mixed", 4), ("mixed", 6), ("calibration", 5)]
+)
+def test_the_held_board_joins_every_sensor_to_the_others(scenario, count):
+    """The plan's boards seen by two sensors at once join all sensors (one chain of shared
+    views), whatever the layout, and none is hidden behind the venue (a pillar in front of
+    the middle of the pattern included: every inner corner is in sight)."""
+    import msgspec
+    import open3d as o3d
+
+    from optrack.geometry import transform_points
+    from optrack.sim.scenario import BoardSpec, PeopleSpec, load_scenario
+
+    base = load_scenario(scenario)
+    board = base.board or BoardSpec(cols=6, rows=5, square=0.15, floor_placements=0)
+    sim = Simulation(
+        msgspec.structs.replace(base, people=PeopleSpec(count=0), board=board), sensors=count
+    )
+    held = [s for s in sim.operator.steps if s.kind == "hold"]
+    joined = {0}
+    for _ in range(count):
+        for step in held:
+            if len(step.sensors) > 1 and joined & set(step.sensors):
+                joined |= set(step.sensors)
+    assert joined == set(range(count))
+    for step in held:
+        corners = transform_points(step.world_T_board, sim.board.pattern.object_points)
+        for k in step.sensors:
+            origin = sim.sensors[k].world_T_camera[:3, 3]
+            rays = np.column_stack([np.tile(origin, (len(corners), 1)), corners - origin])
+            hidden = sim.static.scene.test_occlusions(
+                o3d.core.Tensor(rays.astype(np.float32)), tnear=0.0, tfar=0.99
+            )
+            assert not hidden.numpy().any(), (step.sensors, k)
