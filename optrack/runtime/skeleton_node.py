@@ -198,6 +198,7 @@ class SkeletonNode(Node):
         self.published = 0
         self.updates = 0
         self.unmatched = 0
+        self.failures = 0
         self._clouds_in: collections.deque[PersonCloudsMessage] = collections.deque(maxlen=256)
         self._arrived = threading.Event()
         self._rng = np.random.default_rng(0)
@@ -235,9 +236,16 @@ class SkeletonNode(Node):
         updated = [person for person in self.people.values() if person.fresh]
         newest = -math.inf
         for person in updated:
-            newest = max(newest, self._update(person))
+            try:
+                newest = max(newest, self._update(person))
+            except Exception as error:  # one skeleton's failure never stops the others
+                person.fresh = False
+                self.failures += 1
+                self.last_error = f"a skeleton update failed ({type(error).__name__}: {error})"
+                if self.failures == 1:
+                    self.log.error("%s; further failures are only counted.", self.last_error)
         self._drop(now)
-        if updated:
+        if newest > -math.inf:
             self._publish(newest)
         return len(updated)
 
@@ -351,6 +359,7 @@ class SkeletonNode(Node):
                 "updates": self.updates,
                 "published": self.published,
                 "unmatched_clouds": self.unmatched,
+                "failures": self.failures,
                 "update_ms": self._update_s.median() * 1000.0,
             },
         }
