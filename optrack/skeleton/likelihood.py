@@ -34,6 +34,7 @@ import numpy as np
 from optrack.skeleton.model import G
 
 W = 16  # points per block of the distance loop (one AVX-512 vector of float32)
+BUCKETS = 128  # slices of the sorted cloud along its axis (where a part's points start)
 _FAR = 1.0e4  # the baseline of a point no fixed part explains (far beyond any alpha)
 
 __all__ = [
@@ -119,28 +120,22 @@ def _extent(g, axis: int, reach: float) -> tuple[float, float]:
     return min(start, end) - half, max(start, end) + half
 
 
-@numba.njit(cache=True)
-def _first_at_least(key, value: float) -> int:
-    """The first index of the sorted ``key`` at or above ``value`` (a binary search)."""
-    low, high = 0, key.shape[0]
-    while low < high:
-        mid = (low + high) // 2
-        if key[mid] < value:
-            low = mid + 1
-        else:
-            high = mid
-    return low
+@numba.njit(cache=True, fastmath=True)
+def _bucket(value: float, grid, buckets: int) -> int:
+    """The bucket of the sorted cloud's axis holding ``value`` (clamped to the ends)."""
+    return min(max(int(np.floor((value - grid[0]) * grid[1])), 0), buckets - 1)
 
 
 @numba.njit(fastmath=True, inline="always")
-def likelihood_pose(px, py, pz, axis, baseline, geometry, expected, consts, best, area, counts):
+def likelihood_pose(
+    px, py, pz, axis, starts, grid, baseline, geometry, expected, consts, best, area, counts
+):
     """Eq. 9 for one pose, geometry (K, G), of a cloud from :func:`sorted_points`
     (sorted along ``axis``): each part visits only the run of points that can lie within
     alpha of it. consts: 1 / (2 sigma^2), alpha, support_weight. Inlined where it is
     called, where its arrays are known apart: so its distance loop vectorises."""
     inv_two_sigma2, alpha, weight = consts[0], np.float32(consts[1]), consts[2]
     n = px.shape[0]
-    key = (px, py, pz)[axis]
     best[:] = baseline
     area[:] = -1
     for k in range(geometry.shape[0]):
@@ -152,8 +147,8 @@ def likelihood_pose(px, py, pz, axis, baseline, geometry, expected, consts, best
         near, far = np.int32(2 * k), np.int32(2 * k + 1)
         low, high = _extent(g, axis, (1.0 + consts[1]) * max(r0, r0 + dr))
         # Whole blocks of W from 0 on views: no remainder, no wraparound; it vectorises.
-        lo = _first_at_least(key, low) // W * W
-        hi = min(-(-_first_at_least(key, high) // W) * W, n)
+        lo = starts[_bucket(low, grid, starts.shape[0] - 1)] // W * W
+        hi = min(-(-starts[_bucket(high, grid, starts.shape[0] - 1) + 1] // W) * W, n)
         qx, qy, qz, qb, qa = px[lo:hi], py[lo:hi], pz[lo:hi], best[lo:hi], area[lo:hi]
         for i in range(hi - lo):  # no branches
             vx, vy, vz = qx[i] - ax, qy[i] - ay, qz[i] - az
@@ -181,21 +176,25 @@ def likelihood_pose(px, py, pz, axis, baseline, geometry, expected, consts, best
 
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
-def _kernel(px, py, pz, axis, baseline, geometry, expected, consts, out):
+def _kernel(px, py, pz, axis, starts, grid, baseline, geometry, expected, consts, out):
     n, chunks = geometry.shape[0], min(geometry.shape[0], 64)
     for c in numba.prange(chunks):  # scratch once per chunk of poses
         best, area = np.empty_like(baseline), np.empty(baseline.shape[0], dtype=np.int32)
         counts = np.empty(2 * geometry.shape[1])
         for p in range(c * n // chunks, (c + 1) * n // chunks):
             out[p] = likelihood_pose(
-                px, py, pz, axis, baseline, geometry[p], expected, consts, best, area, counts
-            )
+                px, py, pz, axis, starts, grid, baseline, geometry[p], expected, consts, best,
+                area, counts,
+            )  # fmt: skip
 
 
 def sorted_points(points: np.ndarray, baseline: np.ndarray | None) -> tuple:
-    """The kernels' view of a cloud: (x, y, z, axis, baseline), the points (float32, one
-    contiguous array per coordinate) sorted along the axis of their largest extent, the
-    baseline (none: a distance far beyond alpha) in the same order."""
+    """The kernels' view of a cloud: (x, y, z, axis, starts, grid, baseline). The points
+    (float32, one contiguous array per coordinate) are sorted along the axis of their
+    largest extent, cut into BUCKETS equal slices along it: ``starts`` (BUCKETS + 1,)
+    is the first point of each, ``grid`` (the axis's first value, buckets per metre)
+    finds a value's slice. The baseline (none: a distance far beyond alpha) is in the
+    same order."""
     pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
     axis = int(np.argmax(np.ptp(pts, axis=0))) if len(pts) else 2
     order = np.argsort(pts[:, axis], kind="stable")
@@ -205,7 +204,13 @@ def sorted_points(points: np.ndarray, baseline: np.ndarray | None) -> tuple:
     else:
         base = np.asarray(baseline, dtype=np.float32)[order]
     x, y, z = (np.ascontiguousarray(pts[:, j]) for j in range(3))
-    return x, y, z, axis, base
+    key = (x, y, z)[axis]
+    first, last = (float(key[0]), float(key[-1])) if len(key) else (0.0, 1.0)
+    grid = np.array([first, BUCKETS / max(last - first, 1e-6)])
+    edges = first + np.arange(BUCKETS + 1) / grid[1]
+    starts = np.searchsorted(key, edges, side="left").astype(np.int64)
+    starts[-1] = len(key)  # the last slice holds the last point
+    return x, y, z, axis, starts, grid, base
 
 
 def set_threads(threads: int) -> None:

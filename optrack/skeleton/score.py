@@ -33,7 +33,8 @@ __all__ = ["score_particles"]
 @numba.njit(parallel=True, fastmath=True, cache=True)
 def _score_kernel(
     particles, estimate, mask, cos_e, sin_e, base_rot, base_pts, offsets, chosen, parts,
-    radii, fk_tables, part_tables, px, py, pz, axis, baseline, expected, consts, out,
+    radii, fk_tables, part_tables, px, py, pz, axis, starts, grid, baseline, expected, consts,
+    out,
 ):  # fmt: skip
     n, chunks = particles.shape[0], min(particles.shape[0], 64)
     for c in numba.prange(chunks):  # scratch once per chunk of particles
@@ -51,8 +52,9 @@ def _score_kernel(
             fk_pose(x, cos_x, sin_x, offsets, chosen, rot, pts, *fk_tables)
             geometry_pose(pts, rot, parts, *part_tables, radii, geometry)
             out[p] = likelihood_pose(
-                px, py, pz, axis, baseline, geometry, expected, consts, best, area, counts
-            )
+                px, py, pz, axis, starts, grid, baseline, geometry, expected, consts, best,
+                area, counts,
+            )  # fmt: skip
 
 
 def score_particles(
