@@ -23,11 +23,17 @@ from app.source import NO_SITE, SENSOR_STATUS_KEYS
 from app.widgets.preview import STREAMS, PreviewView
 from optrack.types import DetectionBatch, RGBDFrame
 
+DROPPED_TIP = (
+    "Frames the sensor captured while its node was still busy with an earlier one. The "
+    "node skips them and always takes the newest frame, so the tracks stay current: a "
+    "climbing count only says the computer is slower than the camera (simulated sensors "
+    "on a busy computer drop most of their frames). It matters when fps gets low."
+)
 COLUMN_TIPS = {
     "fps": "Frames per second the sensor's node processes.",
     "latency_ms": "Time from capture to detections on the bus, milliseconds.",
     "clock_offset_ms": "The sensor computer's clock minus the site's clock, milliseconds.",
-    "dropped": "Frames the node skipped because it could not keep up.",
+    "dropped": DROPPED_TIP,
     "last_error": "The last problem the node reported.",
 }
 STREAM_TITLES = {"depth": "Depth", "color": "Colour", "infrared": "Infrared"}
@@ -138,15 +144,31 @@ class SensorsPanel(QWidget):
         tooltip = f"node {node}\n" + "\n".join(f"{k}: {v}" for k, v in sorted(values.items()))
         shown = dict(values)
         state = values.get("state")
-        if state and state != "running" and not values.get("last_error"):
-            shown["last_error"] = f"node {state}"
+        # A node that is not running yet (starting, stopped) says so in grey: not an error.
+        waiting = bool(state and state != "running" and not values.get("last_error"))
+        if waiting:
+            shown["last_error"] = str(state)
         for column, (key, _, fmt) in enumerate(SENSOR_STATUS_KEYS, start=1):
             item = self.table.item(row, column)
             item.setText(_format(shown.get(key), fmt))
             item.setToolTip(tooltip)
-            item.setForeground(ERROR_COLOR if key == "last_error" else self._text_color)
+            error_color = STALE_COLOR if waiting else ERROR_COLOR
+            item.setForeground(error_color if key == "last_error" else self._text_color)
+        if waiting:
+            self._item(row, "last_error").setToolTip(
+                f"The node of sensor '{sensor_id}' is {state}; no problem so far.\n{tooltip}"
+            )
+        dropped = values.get("dropped")
+        if isinstance(dropped, int) and dropped > 0:
+            self._item(row, "dropped").setToolTip(
+                f"{dropped} frames skipped so far. {DROPPED_TIP}\n{tooltip}"
+            )
         self.table.item(row, 0).setToolTip(tooltip)
         self.table.item(row, 0).setForeground(self._text_color)
+
+    def _item(self, row: int, key: str) -> QTableWidgetItem:
+        keys = [k for k, _, _ in SENSOR_STATUS_KEYS]
+        return self.table.item(row, 1 + keys.index(key))
 
     def mark_stale(self) -> None:
         now = time.monotonic()

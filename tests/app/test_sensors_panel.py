@@ -5,7 +5,7 @@ import pytest
 from PySide6.QtGui import QImage
 
 from app.widgets.preview import BOX_COLOR, depth_image
-from app.widgets.sensors_panel import SensorsPanel
+from app.widgets.sensors_panel import ERROR_COLOR, SensorsPanel
 from optrack.types import Detection, DetectionBatch, Intrinsics, RGBDFrame
 
 KINECT = Intrinsics(525.0, 525.0, 319.5, 239.5, width=640, height=480)
@@ -142,5 +142,22 @@ def test_a_detectors_status_is_listed_under_its_sensor(qtbot):
     )
     shown = panel.status_text("kinect2_0")
     assert shown["offset\n(ms)"] == "+0.0"
-    assert shown["last error"] == "node starting"
+    # starting is no error: said in grey, short enough for a narrow dock, and explained
+    assert shown["last error"] == "starting"
+    item = panel.table.item(0, 5)
+    assert item.foreground().color() != ERROR_COLOR
+    assert "is starting; no problem so far" in item.toolTip()
     assert "file:///venue" in panel.table.item(0, 0).toolTip()
+
+
+def test_dropped_frames_say_why_and_whether_they_matter(qtbot):
+    panel = SensorsPanel()
+    qtbot.addWidget(panel)
+    panel.set_status("kinect2_1", {"role": "detector", "state": "running", "dropped": 14000})
+    assert panel.status_text("kinect2_1")["dropped"] == "14000"
+    tip = panel.table.item(0, 4).toolTip()
+    assert tip.startswith("14000 frames skipped so far.")
+    assert "takes the newest frame" in tip and "matters when fps gets low" in tip
+    assert "newest frame" in panel.table.horizontalHeaderItem(4).toolTip()
+    panel.set_status("kinect2_1", {"role": "detector", "last_error": "unplugged"})
+    assert panel.table.item(0, 5).foreground().color() == ERROR_COLOR
