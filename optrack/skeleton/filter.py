@@ -18,7 +18,7 @@ import numba
 import numpy as np
 
 from optrack.params import Params
-from optrack.skeleton.likelihood import associate, signed_distance
+from optrack.skeleton.likelihood import associate, signed_distance, sorted_points
 from optrack.skeleton.model import (
     FRAMES,
     LIMITS,
@@ -179,10 +179,11 @@ class SkeletonFilter:
         idx = np.array(dims)
         consts = (float(p.sigma), float(p.alpha), float(p.support_weight))
         frames = PARTITION_FRAMES[partition]
+        cloud = sorted_points(scored, baseline)
         for layer in range(layers):
             ll = score_particles(
-                self.particles, self.estimate, dims, frames, parts, self.shape, scored,
-                expected, consts, baseline, int(p.threads),
+                self.particles, self.estimate, dims, frames, parts, self.shape, cloud, expected,
+                consts, int(p.threads),
             )  # fmt: skip
             beta = annealing_exponent(ll, float(p.survival_rate))
             w = np.exp(beta * (ll - ll.max()))

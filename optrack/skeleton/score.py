@@ -14,7 +14,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from optrack.skeleton.likelihood import likelihood_pose, set_threads, sorted_points
+from optrack.skeleton.likelihood import likelihood_pose, set_threads
 from optrack.skeleton.model import (
     FK_TABLES,
     FRAMES,
@@ -64,19 +64,19 @@ def score_particles(
     frames: tuple[str, ...],
     parts: np.ndarray,
     shape: BodyShape,
-    points: np.ndarray,
+    cloud: tuple,
     expected: np.ndarray,
     consts: tuple[float, float, float],
-    baseline: np.ndarray | None = None,
     threads: int = 1,
 ) -> np.ndarray:
     """Log-likelihood (eq. 9) of each particle (P, D) of a partition, (P,).
 
     A particle's pose is ``estimate`` with the numbers ``dims`` taken from the particle;
     ``frames`` are the frames those numbers turn (the rest are the estimate's); scored
-    are the ``parts`` (indices) against ``points`` (N, 3) with ``expected`` (K, 2)
-    points per area of interest, ``consts`` (sigma, alpha, support_weight) and the
-    fixed parts' ``baseline`` (N,)."""
+    are the ``parts`` (indices) against ``cloud``, the points and the fixed parts'
+    baseline as :func:`~optrack.skeleton.likelihood.sorted_points` gives them (made
+    once for all the layers of an anneal), with ``expected`` (K, 2) points per area of
+    interest and ``consts`` (sigma, alpha, support_weight)."""
     estimate = np.asarray(estimate, dtype=np.float64)
     base_pts, base_rot = forward_kinematics(estimate, shape)
     mask = np.zeros(D, dtype=np.bool_)
@@ -89,7 +89,7 @@ def score_particles(
         np.ascontiguousarray(particles, dtype=np.float64), estimate, mask, np.cos(estimate.astype(np.float32)),
         np.sin(estimate.astype(np.float32)), base_rot, base_pts, shape._offsets, chosen,
         np.asarray(parts, dtype=np.int64), shape.radii_array, FK_TABLES, PART_TABLES,
-        *sorted_points(points, baseline), np.asarray(expected, dtype=np.float64).reshape(-1),
+        *cloud, np.asarray(expected, dtype=np.float64).reshape(-1),
         np.array([1.0 / (2.0 * sigma * sigma), alpha, weight]), out,
     )  # fmt: skip
     return out

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from optrack.skeleton.filter import PARTITION_FRAMES, PARTITION_PARTS
-from optrack.skeleton.likelihood import log_likelihood_numpy
+from optrack.skeleton.likelihood import log_likelihood_numpy, sorted_points
 from optrack.skeleton.model import (
     PARTITIONS,
     BodyShape,
@@ -35,9 +35,10 @@ def test_fused_score_equals_kinematics_geometry_and_the_numpy_likelihood(partiti
     dims, parts = PARTITIONS[partition], PARTITION_PARTS[partition]
     expected = rng.uniform(0.0, 20.0, (len(parts), 2))
     baseline = None if partition == "torso" else rng.uniform(0.0, 1.0, len(points))
+    cloud = sorted_points(points, baseline)
     fast = score_particles(
-        particles, estimate, dims, PARTITION_FRAMES[partition], parts, shape, points,
-        expected, (0.15, 0.6, 0.5), baseline, threads=2,
+        particles, estimate, dims, PARTITION_FRAMES[partition], parts, shape, cloud,
+        expected, (0.15, 0.6, 0.5), threads=2,
     )  # fmt: skip
     states = np.broadcast_to(estimate, particles.shape).copy()
     states[:, list(dims)] = particles[:, list(dims)]
