@@ -5,9 +5,10 @@ off by default, and then nothing below runs). While it is on:
 
 - each detector node crops, after each frame, every person it detected from
   its own depth points (:func:`person_clouds_message`: the person's vertical
-  cylinder, :func:`optrack.skeleton.fusion.person_cloud`, decimated to at
-  most ``skeleton_fusion.points``) and publishes them, float16 around the
-  person, on ``person_clouds/<sensor>``;
+  cylinder, :func:`optrack.skeleton.fusion.person_cloud`, from every
+  ``skeleton_live.stride``-th depth pixel, decimated to at most
+  ``skeleton_fusion.points``) and publishes them, float16 around the person,
+  on ``person_clouds/<sensor>``;
 - the skeleton node (this module; ``python -m optrack.runtime.skeleton_node
   --site NAME [--config FILE]``, started by ``optrack run`` when the stage
   is on) gives each sensor's person to the track nearest on the floor
@@ -131,6 +132,14 @@ class SkeletonClouds:
         self.published = 0
         self.failures = 0
         self._rng = np.random.default_rng(0)
+        self._crop: Params | None = None  # skeleton_fusion with skeleton_live.stride
+
+    def crop_params(self) -> Params:
+        """The ``skeleton_fusion`` values with the live ``stride`` (rebuilt when changed)."""
+        values = {**self.fusion.as_dict(), "stride": int(self.params.stride)}
+        if self._crop is None or self._crop.as_dict() != values:
+            self._crop = self.fusion.schema.create(values)
+        return self._crop
 
     def offer(self, frame: RGBDFrame, batch: Any, world_T_camera: np.ndarray | None) -> None:
         """After a frame's detections: its people's points, when the stage is on and the
@@ -144,7 +153,7 @@ class SkeletonClouds:
                 frame,
                 world_T_camera,
                 batch.detections,
-                self.fusion,
+                self.crop_params(),
                 self._rng,
             )
         except Exception as error:

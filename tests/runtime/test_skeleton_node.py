@@ -23,27 +23,38 @@ from optrack.net.messages import (
 from optrack.params import REGISTRY
 from optrack.recording import Recording
 from optrack.runtime.config import NODE_PARAMS, load_node_config
-from optrack.runtime.skeleton_node import SKELETON_LIVE_PARAMS, SkeletonNode, person_clouds_message
+from optrack.runtime.skeleton_node import (
+    SKELETON_LIVE_PARAMS,
+    SkeletonClouds,
+    SkeletonNode,
+    person_clouds_message,
+)
 from optrack.skeleton.fusion import FUSION_PARAMS
 from optrack.skeleton.joints import JOINTS
 from optrack.skeleton.model import BodyShape, rest_state
 from optrack.skeleton.params import SKELETON_PARAMS
-from optrack.types import Detection, Track, TrackBatch
+from optrack.types import Detection, DetectionBatch, Track, TrackBatch
 
 from ..skeleton.clouds import seen_cloud
 
 
-def test_a_detectors_person_clouds_hold_each_persons_points(venue):
+def venue_frame(venue):
+    """A frame of the venue's first sensor, its pose, the people it sees well (truth) and
+    their detections."""
     recording = Recording(venue)
     sensor = recording.sensor_ids[0]
     frame = recording.frame(sensor, 10)
     truth = min(recording.ground_truth(), key=lambda g: abs(g.t - frame.timestamp))
     people = [p for p in truth.people if p.visible.get(sensor, 0.0) > 0.5]
-    assert people
     detections = [
         Detection(x=p.x, y=p.y, z=p.height / 2, height=p.height, confidence=1.0) for p in people
     ]
-    pose = np.asarray(recording.sensors[sensor].world_T_camera)
+    return sensor, frame, np.asarray(recording.sensors[sensor].world_T_camera), people, detections
+
+
+def test_a_detectors_person_clouds_hold_each_persons_points(venue):
+    sensor, frame, pose, people, detections = venue_frame(venue)
+    assert people
     fusion = FUSION_PARAMS.create({"radius": 0.5})
     message = person_clouds_message(
         sensor, 3.0, frame, pose, detections, fusion, np.random.default_rng(0)
@@ -58,6 +69,32 @@ def test_a_detectors_person_clouds_hold_each_persons_points(venue):
         assert points[:, 2].min() >= float(fusion.floor_margin) - 1e-3
         assert points[:, 2].max() <= person.height + float(fusion.head_margin) + 1e-3
         assert points[:, 2].max() > 0.8 * person.height  # the head is there
+
+
+def test_a_detector_publishes_peoples_points_only_while_the_stage_is_on(venue, hub, make_client):
+    sensor, frame, pose, people, detections = venue_frame(venue)
+    received: list[PersonCloudsMessage] = []
+    observer = make_client("observer")
+    observer.subscribe(
+        observer.keys.person_clouds(), PersonCloudsMessage, lambda m, k: received.append(m)
+    )
+    live: dict = {}
+    clouds = SkeletonClouds(make_client(sensor), sensor, live)
+    assert set(live) == {"skeleton_live", "skeleton_fusion"}  # the node's live stages
+    batch = DetectionBatch(sensor_id=sensor, stamp=3.0, detections=detections)
+    clouds.offer(frame, batch, pose)  # off by default
+    clouds.params.update({"enabled": True})
+    clouds.offer(frame, batch, None)  # an uncalibrated sensor has no world points
+    assert clouds.published == 0
+    clouds.offer(frame, batch, pose)
+    deadline = time.monotonic() + 5.0
+    while not received and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert len(received) == 1 and clouds.published == 1
+    assert len(received[0].clouds) == len(people)
+    assert clouds.crop_params().stride == 2 and clouds.fusion.stride == 1
+    clouds.params.update({"stride": 3})
+    assert clouds.crop_params().stride == 3
 
 
 def test_the_skeleton_stages_are_in_a_nodes_config(tmp_path):
