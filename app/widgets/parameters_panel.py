@@ -49,8 +49,37 @@ def decimals_for(param: Param) -> int:
     return MAX_DECIMALS
 
 
-def tooltip_for(stage: str, param: Param) -> str:
-    return f"{stage}.{param.name}: {param.help}\nAccepts {param.describe_range()}; default {param.default}."
+# Words of parameter and stage names an operator reads in capitals.
+ACRONYMS = frozenset(
+    "bvh cpu csv fps gui hog icp id ip ir json osc pnp rgb rms tls ttl udp ukf uri url".split()
+)
+# Unit spellings written the way an operator reads them.
+UNIT_SIGNS = (("^-1", "⁻¹"), ("^2", "²"), ("^3", "³"), ("^4", "⁴"))
+
+
+def unit_text(text: str) -> str:
+    """``text`` with exponents written as superscripts (m^2/s^4 -> m²/s⁴)."""
+    for written, shown in UNIT_SIGNS:
+        text = text.replace(written, shown)
+    return text
+
+
+def title_for(name: str) -> str:
+    """A stage or parameter name in words: ``ukf_alpha`` -> "UKF alpha"."""
+    words = [w.upper() if w in ACRONYMS else w for w in name.split("_") if w]
+    if words and not words[0].isupper():
+        words[0] = words[0].capitalize()
+    return " ".join(words)
+
+
+def tooltip_for(stage: str, param: Param, value: Any = None) -> str:
+    """The help text, the accepted range and the default; the value in use when it is
+    not the default (a site may start a stage with other values than the schema's)."""
+    now = "" if value is None or value == param.default else f"; in use now: {value}"
+    return unit_text(
+        f"{stage}.{param.name}: {param.help}\n"
+        f"Accepts {param.describe_range()}; default {param.default}{now}."
+    )
 
 
 class ParamEditor(QWidget):
@@ -85,7 +114,8 @@ class ParamEditor(QWidget):
             layout.addWidget(self.line, 1)
         else:
             self._build_number(kind, layout)
-        self.setToolTip(tooltip_for(stage, param))
+        self.stage = stage
+        self.label: QLabel | None = None  # the form's name of this control (same tooltip)
         self.set_value(param.default)
 
     def _build_number(self, kind: type, layout: QHBoxLayout) -> None:
@@ -108,8 +138,9 @@ class ParamEditor(QWidget):
         spin.setKeyboardTracking(False)  # one edit when the operator presses Enter
         spin.setAccelerated(True)
         if param.unit:
-            spin.setSuffix(f" {param.unit}")
-        spin.setMinimumWidth(110)
+            spin.setSuffix(f" {unit_text(param.unit)}")
+        # Wide enough for the longest value and its unit: a narrow dock never cuts it off.
+        spin.setMinimumWidth(max(110, spin.sizeHint().width()))
         self.spin = spin
         if param.min is not None and param.max is not None and param.max > param.min:
             step = param.step or (param.max - param.min) / 1000
@@ -191,10 +222,9 @@ class ParamEditor(QWidget):
             for widget in (self.check, self.combo, self.line, self.spin):
                 if widget is not None:
                     widget.blockSignals(False)
-
-
-def _title(name: str) -> str:
-    return name.replace("_", " ").capitalize()
+        self.setToolTip(tooltip_for(self.stage, self.param, self.value()))
+        if self.label is not None:
+            self.label.setToolTip(self.toolTip())
 
 
 class ParametersPanel(QWidget):
@@ -278,10 +308,10 @@ class ParametersPanel(QWidget):
             editor.edited.connect(
                 lambda value, stage=stage, name=param.name: self.edit(stage, name, value)
             )
-            unit = f" ({param.unit})" if param.unit else ""
-            label = QLabel(f"<b>{_title(param.name)}</b>{unit}")
-            label.setToolTip(editor.toolTip())
-            form.addRow(label, editor)
+            unit = f" ({unit_text(param.unit)})" if param.unit else ""
+            editor.label = QLabel(f"<b>{title_for(param.name)}</b>{unit}")
+            editor.label.setToolTip(editor.toolTip())
+            form.addRow(editor.label, editor)
             editors[param.name] = editor
         self.editors[stage] = editors
         scroll = QScrollArea()
@@ -289,8 +319,11 @@ class ParametersPanel(QWidget):
         scroll.setWidgetResizable(True)
         scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         scroll.setWidget(body)
-        title = stage if stage not in self.local_stages else f"{stage} (this window)"
-        self.pages.addItem(scroll, title)
+        title = title_for(stage)
+        index = self.pages.addItem(
+            scroll, title if stage not in self.local_stages else f"{title} (this window)"
+        )
+        self.pages.setItemToolTip(index, f"Section '{stage}' of a config file or preset.")
 
     # -------------------------------------------------------------- editing
     def edit(self, stage: str, name: str, value: Any) -> bool:

@@ -43,9 +43,10 @@ def test_controls_carry_units_ranges_and_help(panel):
     assert editor(panel, "classifier").combo.currentText() == "hog"
     assert editor(panel, "max_missing").slider is None  # no upper bound: a spin box only
     assert [panel.pages.itemText(i) for i in range(panel.pages.count())] == [
-        "detector_gui_test",
-        "view_gui_test (this window)",
+        "Detector GUI test",
+        "View GUI test (this window)",
     ]
+    assert panel.pages.itemToolTip(0) == "Section 'detector_gui_test' of a config file or preset."
 
 
 def test_moving_a_slider_emits_the_validated_value(qtbot, panel):
@@ -125,3 +126,51 @@ def test_every_node_stage_of_optrack_builds_a_page(qtbot):
             assert panel.editors[stage][param.name].value() == param.default, (
                 f"{stage}.{param.name}"
             )
+
+
+def test_names_units_and_fields_read_as_words_and_are_never_cut_off(qtbot):
+    """Page and parameter names in words (acronyms in capitals), exponents written as
+    superscripts, and a value field wide enough for its longest value and unit even in a
+    narrow dock."""
+    from PySide6.QtGui import QFontMetrics
+
+    from app.widgets.parameters_panel import title_for
+
+    schema = Schema(
+        "calibration_capture",
+        [
+            Param("ukf_alpha", 0.001, min=0.0001, max=1.0, help="Spread of the sigma points."),
+            Param(
+                "acceleration_noise",
+                12.5,
+                min=0.0,
+                max=100000.0,
+                step=0.001,
+                unit="m^2/s^4",
+                help="Process noise.",
+            ),
+        ],
+    )
+    panel = ParametersPanel()
+    qtbot.addWidget(panel)
+    panel.set_schemas({schema.stage: schema})
+    panel.resize(200, 400)
+    panel.show()
+    assert panel.pages.itemText(0) == "Calibration capture"
+    assert title_for("ukf_alpha") == "UKF alpha" and title_for("use_hog") == "Use HOG"
+    noise = panel.editors["calibration_capture"]["acceleration_noise"]
+    assert noise.label.text() == "<b>Acceleration noise</b> (m²/s⁴)"
+    assert noise.spin.suffix() == " m²/s⁴" and "m^2" not in noise.toolTip()
+    longest = noise.spin.textFromValue(noise.spin.maximum()) + noise.spin.suffix()
+    assert noise.spin.width() >= QFontMetrics(noise.spin.font()).horizontalAdvance(longest)
+
+
+def test_the_tooltip_says_the_value_in_use_when_it_is_not_the_default(panel):
+    """A site may start a stage with other values than the schema's defaults: the
+    tooltip beside the field names both, never a default that disagrees unexplained."""
+    voxel = editor(panel, "voxel_size")
+    assert "default 0.06." in voxel.toolTip()
+    panel.set_values(DETECTOR.stage, {"voxel_size": 0.1})
+    assert voxel.spin.value() == 0.1
+    assert "default 0.06; in use now: 0.1." in voxel.toolTip()
+    assert voxel.label.toolTip() == voxel.toolTip()
