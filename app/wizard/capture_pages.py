@@ -11,7 +11,14 @@ from PySide6.QtWidgets import QHBoxLayout, QLabel, QSplitter, QWidget
 
 from app.wizard.jobs import action_button
 from app.wizard.page import DONE_STYLE, WizardPage, calibrated_network, rms_text
-from app.wizard.widgets import CovisibilityGraph, SensorImages, SensorTable, count_level
+from app.wizard.widgets import (
+    CovisibilityGraph,
+    SensorImages,
+    SensorTable,
+    count_level,
+    operator_text,
+    views_text,
+)
 from optrack.types import NetworkCalibration
 
 if TYPE_CHECKING:
@@ -130,7 +137,7 @@ class ExtrinsicsPage(WizardPage):
                 sensor,
                 live.image,
                 live.board_seen,
-                caption=f"{sensor}: {live.views} views" + (" ✓" if live.calibrated else ""),
+                caption=f"{sensor}: {views_text(live.views)}" + (" ✓" if live.calibrated else ""),
             )
         self.table.set_rows(rows, levels)
         calibrated = {s for s, live in state.sensors.items() if live.calibrated}
@@ -254,7 +261,7 @@ class FloorPage(WizardPage):
     def show_state(self, state: LiveState) -> None:
         super().show_state(state)
         self.floor_count = state.floor_views
-        operator = f" ({state.operator})" if state.operator else ""
+        operator = f" ({operator_text(state.operator)})" if state.operator else ""
         self.floor_views.setText(f"Floor views: {state.floor_views}{operator}")
         if state.phase != "floor":
             return

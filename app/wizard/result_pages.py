@@ -142,11 +142,18 @@ class RefinementPage(WizardPage):
         self.shown = report
         self.before.set_trajectories(report.trajectories_before)
         self.after.set_trajectories(report.trajectories_after)
+        # Nothing corrected: the after plot would only repeat the before plot.
+        self.after.setVisible(bool(report.corrections))
         refused, board = report.refused, report.board_rms_px
+        before = f"{100 * report.error_before_m:.1f} cm on average"
         self.figure.setText(
-            f"The sensors disagree on where the person was by "
-            f"{100 * report.error_before_m:.1f} cm on average before refinement and "
-            f"{100 * report.error_after_m:.1f} cm after."
+            (
+                f"The sensors disagree on where the person was by {before} before "
+                f"refinement and {100 * report.error_after_m:.1f} cm after."
+                if report.corrections
+                else "Nothing changed: the walk gave no correction to apply; the sensors "
+                f"disagree on where the person was by {before}."
+            )
             + (
                 f" Not refined (too few detections): {', '.join(report.skipped)}."
                 if report.skipped

@@ -20,7 +20,7 @@ from PySide6.QtWidgets import (
 
 from app.wizard.jobs import action_button
 from app.wizard.page import DONE_STYLE, WizardPage
-from app.wizard.widgets import ImageTile, SensorTable, count_level
+from app.wizard.widgets import ImageTile, SensorTable, count_level, views_text
 from optrack.calibration.board import Checkerboard
 from optrack.errors import UserError
 
@@ -314,7 +314,7 @@ class IntrinsicsPage(WizardPage):
                 live.image,
                 live.board_seen,
                 live.coverage,
-                caption=f"{sensor}: {live.views} views",
+                caption=f"{sensor}: {views_text(live.views)}",
             )
             self._rows()
 

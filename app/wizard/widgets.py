@@ -38,6 +38,8 @@ __all__ = [
     "SensorTable",
     "TrajectoryPlot",
     "count_level",
+    "operator_text",
+    "views_text",
 ]
 
 # Red / yellow / green: too few views, enough to solve, plenty.
@@ -50,6 +52,26 @@ CALIBRATED_COLOR = QColor(70, 160, 80)
 UNCALIBRATED_COLOR = QColor(150, 150, 150)
 BACKGROUND = QColor(25, 28, 34)
 TEXT = QColor(230, 230, 230)
+
+
+# What the simulated operator does, in words (the site status says its action's name).
+OPERATOR_WORDS = {
+    "move_board": "the simulated operator carries the board to each camera and pair",
+    "show_board": "the simulated operator shows the board to one camera",
+    "lay_board": "the simulated operator lays the board on the floor",
+    "walk": "a simulated person walks through every view",
+    "people": "the site's own people walk",
+}
+
+
+def operator_text(operator: str) -> str:
+    """The simulated operator's action in words; any other sentence as it is."""
+    return OPERATOR_WORDS.get(operator, operator)
+
+
+def views_text(count: int) -> str:
+    """``1 view``, ``2 views``."""
+    return f"{count} view" if count == 1 else f"{count} views"
 
 
 def count_level(count: int, fair: int, good: int) -> str:

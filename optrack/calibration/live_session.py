@@ -125,7 +125,10 @@ class LiveSession:
         self._sensors = {sid: _Sensor() for sid in self.sensors}
         self.phase = "idle"
         self._phase_started = time.monotonic()
-        self._message = "Choose a page and press start."
+        self._message = (
+            "Not capturing yet: the board and floor pages start when opened, the "
+            "intrinsics page on Start capture."
+        )
         self.intrinsics_sensor: str | None = None
         self.intrinsics_results: dict[str, IntrinsicsResult] = {}
         self.still = StillBoards(
@@ -507,6 +510,9 @@ class LiveSession:
             self._message = (
                 f"Refined: sensors agree within {report.error_after_m * 100:.1f} cm "
                 f"(before: {report.error_before_m * 100:.1f} cm)."
+                if report.corrections
+                else "Nothing refined: the walk gave no correction to apply (sensors agree "
+                f"within {report.error_before_m * 100:.1f} cm); the calibration is unchanged."
             )
             if report.refused:
                 self._message += (

@@ -37,7 +37,8 @@ class HeadlessPlan:
 def describe_state(state: LiveState) -> str:
     """One progress line: the phase, each sensor's views and search rate, the advice."""
     sensors = ", ".join(
-        f"{s} {v.views} views{' calibrated' if v.calibrated else ''} ({v.capture_hz:.1f} Hz)"
+        f"{s} {v.views} view{'' if v.views == 1 else 's'}{' calibrated' if v.calibrated else ''} "
+        f"({v.capture_hz:.1f} Hz)"
         for s, v in sorted(state.sensors.items())
     )
     extra = f", {state.floor_views} floor views" if state.phase == "floor" else ""

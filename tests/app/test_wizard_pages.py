@@ -144,6 +144,10 @@ def test_floor_page_counts_floor_views_and_needs_a_solve(wizard):
     assert page.floor_views.text() == "Floor views: 4 (laying the board at place 2 of 3)"
     assert page.images.tiles["cam0"].caption == "cam0, on the floor"
     assert not page.isComplete()  # nothing solved yet
+    page.show_state(state("floor", [sensor("cam0", 1, True)], operator="lay_board"))
+    assert page.floor_views.text() == (
+        "Floor views: 0 (the simulated operator lays the board on the floor)"
+    )
 
 
 def test_a_site_without_sensors_is_said_in_a_sentence_on_page_one(qtbot):
@@ -185,6 +189,7 @@ def test_refinement_page_plots_trajectories_before_and_after_and_the_error_figur
         error_after_m=0.0198,
         trajectories_before={"cam0": walk, "cam1": walk + 0.1},
         trajectories_after={"cam0": walk, "cam1": walk + 0.01},
+        corrections={"cam1": make_pose(np.eye(3), [0.09, 0.0, 0.0])},
         skipped=["cam2"],
         refused={"cam3": 3.14},
         board_rms_px={"cam3": 0.12},
@@ -244,3 +249,38 @@ def test_review_page_shows_each_sensors_quality_from_the_calibration_file(wizard
         "on the floor; refined from a walk: the sensors agree within 2.0 cm (5.0 cm before); "
         "cam0 kept the checkerboard's pose (the walk's correction contradicted its board views)."
     )
+
+
+def test_one_view_is_one_view_not_one_views(wizard):
+    page = wizard.extrinsics_page
+    page.images.set_sensors(SENSORS)
+    page.show_state(state("extrinsics", [sensor("cam0", 1, False), sensor("cam1", 2, False)]))
+    assert page.images.tiles["cam0"].caption == "cam0: 1 view"
+    assert page.images.tiles["cam1"].caption == "cam1: 2 views"
+    intrinsics = wizard.intrinsics_page
+    intrinsics.sensor.addItems(SENSORS)
+    intrinsics.sensor.setCurrentText("cam1")
+    intrinsics.show_state(state("intrinsics", [sensor("cam1", 1, False)]))
+    assert intrinsics.tile.caption == "cam1: 1 view"
+
+
+def test_a_refinement_that_changed_nothing_says_so_and_shows_no_after_plot(wizard):
+    from optrack.calibration.live import RefinementReport
+    from optrack.types import NetworkCalibration, SensorCalibration
+
+    page = wizard.refinement_page
+    walk = np.column_stack([np.linspace(0, 1, 20), np.zeros(20), np.full(20, 1.1)])
+    report = RefinementReport(
+        calibration=NetworkCalibration(
+            sensors={"cam0": SensorCalibration(world_T_camera=matrix(np.eye(4)))}
+        ),
+        error_before_m=0.031,
+        error_after_m=0.031,
+        trajectories_before={"cam0": walk, "cam1": walk},
+        trajectories_after={"cam0": walk, "cam1": walk},
+    )
+    page.show_report(report)
+    text = page.figure.text()
+    assert text.startswith("Nothing changed: the walk gave no correction to apply")
+    assert "3.1 cm on average" in text and "after" not in text
+    assert page.after.isHidden()
