@@ -20,7 +20,6 @@ from optrack.skeleton.model import (
     FRAMES,
     PART_TABLES,
     BodyShape,
-    D,
     G,
     fk_pose,
     forward_kinematics,
@@ -32,7 +31,7 @@ __all__ = ["score_particles"]
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
 def _score_kernel(
-    particles, estimate, mask, cos_e, sin_e, base_rot, base_pts, offsets, chosen, parts,
+    particles, estimate, dims, cos_p, sin_p, cos_e, sin_e, base_rot, base_pts, offsets, chosen, parts,
     radii, fk_tables, part_tables, px, py, pz, axis, starts, grid, baseline, expected, consts,
     out,
 ):  # fmt: skip
@@ -44,11 +43,9 @@ def _score_kernel(
         best, area = np.empty_like(baseline), np.empty(baseline.shape[0], dtype=np.int32)
         counts = np.empty(2 * parts.shape[0])
         for p in range(c * n // chunks, (c + 1) * n // chunks):
-            for d in range(x.shape[0]):
-                if mask[d]:
-                    x[d] = particles[p, d]
-                    angle = np.float32(x[d])  # as forward_kinematics: float32
-                    cos_x[d], sin_x[d] = np.cos(angle), np.sin(angle)
+            for j in range(dims.shape[0]):
+                d = dims[j]
+                x[d], cos_x[d], sin_x[d] = particles[p, d], cos_p[p, j], sin_p[p, j]
             fk_pose(x, cos_x, sin_x, offsets, chosen, rot, pts, *fk_tables)
             geometry_pose(pts, rot, parts, *part_tables, radii, geometry)
             out[p] = likelihood_pose(
@@ -79,15 +76,17 @@ def score_particles(
     interest and ``consts`` (sigma, alpha, support_weight)."""
     estimate = np.asarray(estimate, dtype=np.float64)
     base_pts, base_rot = forward_kinematics(estimate, shape)
-    mask = np.zeros(D, dtype=np.bool_)
-    mask[list(dims)] = True
+    dims = np.asarray(dims, dtype=np.int64)
+    particles = np.ascontiguousarray(particles, dtype=np.float64)
+    # Sines and cosines in float32 by numpy's vector path, as forward_kinematics does.
+    turned, fixed = particles[:, dims].astype(np.float32), estimate.astype(np.float32)
     chosen = np.array([name in frames for name in FRAMES])
     sigma, alpha, weight = consts
     out = np.empty(len(particles))
     set_threads(threads)
     _score_kernel(
-        np.ascontiguousarray(particles, dtype=np.float64), estimate, mask, np.cos(estimate.astype(np.float32)),
-        np.sin(estimate.astype(np.float32)), base_rot, base_pts, shape._offsets, chosen,
+        particles, estimate, dims, np.cos(turned), np.sin(turned), np.cos(fixed),
+        np.sin(fixed), base_rot, base_pts, shape._offsets, chosen,
         np.asarray(parts, dtype=np.int64), shape.radii_array, FK_TABLES, PART_TABLES,
         *cloud, np.asarray(expected, dtype=np.float64).reshape(-1),
         np.array([1.0 / (2.0 * sigma * sigma), alpha, weight]), out,
