@@ -26,11 +26,15 @@ from PySide6.QtWidgets import (
 from app.source import NO_SITE
 from optrack.errors import UserError
 from optrack.outputs.streams import OUTPUT_KINDS, OUTPUT_PORTS
-from optrack.outputs.udp import parse_address
+from optrack.outputs.udp import no_receiver_note, parse_address
 
 KIND_TITLES = {"udp": "UDP JSON", "osc": "OSC", "websocket": "WebSocket"}
 DEFAULT_ADDRESSES = {kind: f"127.0.0.1:{port}" for kind, port in OUTPUT_PORTS.items()}
 COLUMNS = ("on", "kind", "address", "packets/s", "problem")
+NO_RECEIVER_TIP = (
+    "No program listens at this address yet. The site sends the tracks anyway; a program "
+    "that starts listening there gets them at once."
+)
 
 
 def check_address(kind: str, address: str) -> str | None:
@@ -153,16 +157,23 @@ class OutputsPanel(QWidget):
                     else Qt.CheckState.Unchecked
                 )
                 rate = destination.get("packets_per_s")
+                error = destination.get("error") or ""
+                # Nothing listening yet is the default output's state, not a fault: grey.
+                waiting = no_receiver_note(destination["address"], error)
                 cells = [
                     on,
                     QTableWidgetItem(KIND_TITLES.get(destination["kind"], destination["kind"])),
                     QTableWidgetItem(destination["address"]),
                     QTableWidgetItem("" if rate is None else f"{rate:.1f}"),
-                    QTableWidgetItem(destination.get("error") or ""),
+                    QTableWidgetItem(waiting or error),
                 ]
-                if destination.get("error"):  # the sentence, whole, on every cell of the row
+                if waiting:
                     for cell in cells:
-                        cell.setToolTip(destination["error"])
+                        cell.setToolTip(f"{NO_RECEIVER_TIP} ({error})")
+                    cells[-1].setForeground(QColor(130, 130, 130))
+                elif error:  # the sentence, whole, on every cell of the row
+                    for cell in cells:
+                        cell.setToolTip(error)
                     cells[-1].setForeground(QColor(190, 40, 40))
                 for column, cell in enumerate(cells):
                     self.table.setItem(row, column, cell)

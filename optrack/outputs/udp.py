@@ -24,6 +24,7 @@ __all__ = [
     "OutputError",
     "UdpSender",
     "join_destinations",
+    "no_receiver_note",
     "parse_address",
     "parse_destinations",
     "resolve_destination",
@@ -177,9 +178,18 @@ class Destination:
         self.sock.close()
 
 
+NOTHING_LISTENS = "nothing listens at"
+
+
+def no_receiver_note(address: str, last_error: str) -> str:
+    """``no receiver on ADDRESS yet`` when a destination's last datagram found no program
+    listening there (connection refused): a state, not a fault of the site; else ''."""
+    return f"no receiver on {address} yet" if last_error.startswith(NOTHING_LISTENS) else ""
+
+
 def _describe(error: OSError, address: str) -> str:
     if error.errno == errno.ECONNREFUSED:
-        return f"nothing listens at {address} (connection refused)"
+        return f"{NOTHING_LISTENS} {address} (connection refused)"
     if error.errno in (errno.EAGAIN, errno.EWOULDBLOCK, errno.ENOBUFS):
         return f"a datagram to {address} was dropped (send buffer full)"
     if error.errno in (errno.ENETUNREACH, errno.EHOSTUNREACH):

@@ -37,7 +37,7 @@ from optrack.errors import UserError
 from optrack.net.bus import Bus
 from optrack.net.keys import check_name
 from optrack.net.messages import StatusMessage
-from optrack.outputs.udp import join_destinations
+from optrack.outputs.udp import join_destinations, no_receiver_note
 from optrack.params import Params, save_config
 from optrack.runtime.config import NodeConfig, state_dir
 from optrack.runtime.display import display_problem
@@ -436,7 +436,8 @@ class Site:
         outputs = statuses.get("outputs")
         if outputs is not None:
             for d in outputs.destinations:
-                errors = f", {d.errors} errors" if d.errors else ""
+                waiting = no_receiver_note(d.address, d.last_error)
+                errors = f", {waiting}" if waiting else f", {d.errors} errors" if d.errors else ""
                 parts.append(f"{d.kind} {d.address} sent {d.sent}{errors}")
         return "; ".join(parts)
 

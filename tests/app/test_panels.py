@@ -147,3 +147,37 @@ def test_python_warnings_reach_the_log_from_any_thread(qtbot):
     finally:
         logger.removeHandler(handler)
     assert panel.lines()[0].endswith("Warning: calibration file a.yaml is old")
+
+
+def test_the_default_output_with_no_listener_says_so_once_in_grey(qtbot):
+    """A UDP destination nobody listens at (the default 127.0.0.1:21234 on a fresh
+    machine) is a state, not a fault: 'no receiver on ... yet', in grey, explained."""
+    import socket
+    import time
+
+    from app.widgets.outputs_panel import NO_RECEIVER_TIP
+    from optrack.outputs.udp import Destination
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]  # closed again below: nothing listens there
+    destination = Destination("udp", "127.0.0.1", port)
+    try:
+        for _ in range(10):
+            destination.send(b"{}")
+            time.sleep(0.01)
+        status = destination.status()
+    finally:
+        destination.close()
+    assert status.errors >= 1
+    panel = OutputsPanel()
+    qtbot.addWidget(panel)
+    reported = {"kind": "udp", "address": status.address, "sent": status.sent}
+    panel.set_status(
+        "outputs", {"role": "outputs", "destinations": [{**reported, "error": status.last_error}]}
+    )
+    problem = panel.table.item(0, 4)
+    assert problem.text() == f"no receiver on 127.0.0.1:{port} yet"
+    assert problem.foreground().color().red() < 150  # grey, not the red of a fault
+    assert problem.toolTip().startswith(NO_RECEIVER_TIP)
+    assert "errors" not in problem.text()
