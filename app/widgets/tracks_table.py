@@ -17,6 +17,12 @@ from optrack.types import Skeleton, SkeletonBatch, Track, TrackBatch, TrackStatu
 COLUMNS = ("ID", "x (m)", "y (m)", "height (m)", "age (s)", "confidence", "status", "skeleton")
 STATUS_COLUMN = COLUMNS.index("status")
 SKELETON_COLUMN = COLUMNS.index("skeleton")
+CONFIDENCE_TIP = (
+    "How person-like the detector found this person in its last detection (the HOG "
+    "classifier's margin; larger is surer). Below zero is normal for someone far away, "
+    "partly out of view or behind something: the tracker keeps a person it has confirmed "
+    "over several frames."
+)
 # Skeletons not sent again for this long are no longer shown, nor their column (the
 # skeleton stage was turned off); the column is there only while skeletons come.
 SKELETON_STALE_S = 2.0
@@ -103,6 +109,8 @@ class TracksModel(QAbstractTableModel):
     def headerData(self, section: int, orientation: Qt.Orientation, role: int = 0) -> Any:  # noqa: N802
         if role == Qt.ItemDataRole.DisplayRole and orientation == Qt.Orientation.Horizontal:
             return COLUMNS[section]
+        if role == Qt.ItemDataRole.ToolTipRole and section == COLUMNS.index("confidence"):
+            return CONFIDENCE_TIP
         return None
 
     def data(self, index: QModelIndex, role: int = 0) -> Any:
@@ -118,6 +126,8 @@ class TracksModel(QAbstractTableModel):
             return QColor(*track_color(track.id))
         if role == Qt.ItemDataRole.ForegroundRole and track.status == TrackStatus.MISSING:
             return QColor(128, 128, 128)
+        if role == Qt.ItemDataRole.ToolTipRole and column == COLUMNS.index("confidence"):
+            return CONFIDENCE_TIP
         if role == Qt.ItemDataRole.ToolTipRole and track.sensors:
             return "Seen by " + ", ".join(track.sensors)
         return None

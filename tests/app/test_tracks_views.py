@@ -134,3 +134,16 @@ def test_a_selected_track_stays_selected_while_it_moves(qtbot):
     selected = table.view.selectionModel().selectedRows()
     assert [table.model.index(i.row(), 0).data() for i in selected] == ["7"]
     assert table.model.index(1, 1).data() == "1.30"
+
+
+def test_a_negative_confidence_is_explained_where_it_is_shown(qtbot):
+    table = TracksTable()
+    qtbot.addWidget(table)
+    person = Track(5, 0.5, 0.5, 1.7, age=9.0, confidence=-2.21, status=TrackStatus.NORMAL)
+    table.set_batch(batch(3.0, person))
+    column = 5
+    assert table.model.index(0, column).data() == "-2.21"
+    tip = table.model.index(0, column).data(Qt.ItemDataRole.ToolTipRole)
+    assert "Below zero is normal" in tip and "HOG" in tip
+    header = table.model.headerData(column, Qt.Orientation.Horizontal, Qt.ItemDataRole.ToolTipRole)
+    assert header == tip
