@@ -1,0 +1,29 @@
+"""First start in seconds: `optrack run --headless` with an empty cache sends its first
+UDP datagram with tracks within 10 s (the embedded venue renders live: nothing first)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import free_port
+from tests.packaging.conftest import clean_env, first_tracks_s
+
+pytestmark = pytest.mark.slow
+
+
+def test_first_tracks_within_10_s_with_an_empty_cache(tmp_path: Path) -> None:
+    optrack = shutil.which("optrack", path=str(Path(sys.executable).parent))
+    assert optrack is not None
+    config = tmp_path / "site.yaml"
+    config.write_text(f"bus:\n  local_port: {free_port()}\n")
+    env = {**clean_env(), "XDG_CACHE_HOME": str(tmp_path / "cache"), "HOME": str(tmp_path)}
+    command = [optrack, "run", "--headless", "--seconds", "30", "--config", str(config)]
+    first = first_tracks_s(command, env, timeout=30)
+    print(json.dumps({"first_tracks_s": round(first, 1)}))
+    assert first <= 10.0
+    assert not (tmp_path / "cache" / "optrack").exists()  # nothing cached
