@@ -17,6 +17,7 @@ from PySide6.QtGui import QAction, QImage, QKeySequence, QPainter
 from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow, QWidget
 
 from app.embedded_site import EmbeddedSite
+from app.folders import calibrations_folder, recordings_folder, start_in
 from app.source import NO_SITE, SiteSource, node_schemas
 from app.view_params import VIEW_PARAMS
 from app.widgets.log_panel import LogPanel, QtLogHandler
@@ -288,7 +289,10 @@ class MainWindow(QMainWindow):
 
     def _ask_calibration(self) -> None:
         path, _ = QFileDialog.getOpenFileName(
-            self, "Open a calibration file", "", "Calibration (*.yaml *.yml)"
+            self,
+            "Open a calibration file",
+            start_in(calibrations_folder()),
+            "Calibration (*.yaml *.yml)",
         )
         if path:
             self.open_calibration(path)
@@ -299,7 +303,9 @@ class MainWindow(QMainWindow):
         return self.recording_opener.open(path)
 
     def _ask_recording(self) -> None:
-        path = QFileDialog.getExistingDirectory(self, "Open a recording (its folder)")
+        path = QFileDialog.getExistingDirectory(
+            self, "Open a recording (its folder)", start_in(recordings_folder())
+        )
         if path:
             self.open_recording(path)
 

@@ -44,7 +44,13 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from app.folders import recordings_folder
 from optrack.errors import UserError
+
+# What the playback box says it plays: a recording opened here, the site's own replayed
+# sensors (the embedded venue replays its rendering), or live sensors.
+LIVE_TEXT = "Live sensors. Open a recording to play it through the site instead."
+REPLAYED_TEXT = "Playing the site's own replayed sensors (no recording opened here)."
 
 __all__ = ["SPEEDS", "RecordingOpener", "RecordingPanel", "default_take_folder", "format_bytes"]
 
@@ -69,7 +75,7 @@ def format_bytes(count: float) -> str:
 
 def default_take_folder(parent: Path | None = None) -> str:
     """A new take's folder: ``~/optrack-recordings/take-YYYYmmdd-HHMMSS``."""
-    root = parent if parent is not None else Path.home() / "optrack-recordings"
+    root = parent if parent is not None else recordings_folder()
     return str(root / f"take-{time.strftime('%Y%m%d-%H%M%S')}")
 
 
@@ -152,7 +158,7 @@ class RecordingPanel(QWidget):
     def _play_box(self) -> QGroupBox:
         """Play a recording through the site: open, pause, step, speed, position, rates."""
         play_box = QGroupBox("Play a recording through the site")
-        self.source_label = QLabel("Live sensors: nothing to play.")
+        self.source_label = QLabel(LIVE_TEXT)
         self.source_label.setWordWrap(True)
         self.open_button = QPushButton("Open recording…")
         self.open_button.setToolTip(
@@ -237,8 +243,7 @@ class RecordingPanel(QWidget):
     def set_recording_path(self, path: str) -> None:
         """The recording the site now plays ("" for live sensors)."""
         self.recording_path = path
-        self.source_label.setText(f"Playing {path}" if path else "Live sensors: nothing to play.")
-        self.source_label.setToolTip(path)
+        self._update_controls()
 
     def reset(self) -> None:
         """Forget the nodes (another site is coming)."""
@@ -323,6 +328,11 @@ class RecordingPanel(QWidget):
         self.pause_button.setEnabled(playing and not busy)
         self.step_button.setEnabled(playing and paused and not busy)
         self.speed.setEnabled(playing and not busy)
+        path = self.recording_path
+        self.source_label.setText(
+            f"Playing {path}" if path else REPLAYED_TEXT if playing else LIVE_TEXT
+        )
+        self.source_label.setToolTip(path)
         if not playing:
             self.position.setValue(0)
             self.position_label.setText("–")

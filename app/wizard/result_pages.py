@@ -11,6 +11,7 @@ import numpy as np
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QComboBox, QFileDialog, QHBoxLayout, QLabel, QSpinBox
 
+from app.folders import calibrations_folder, start_in
 from app.wizard.jobs import action_button
 from app.wizard.page import DONE_STYLE, WizardPage, rms_text
 from app.wizard.widgets import SensorTable, TrajectoryPlot, count_level
@@ -353,7 +354,10 @@ class ReviewPage(WizardPage):
 
     def _ask_save(self) -> None:
         path, _ = QFileDialog.getSaveFileName(
-            self, "Save the calibration", "calibration.yaml", "Calibration (*.yaml *.yml)"
+            self,
+            "Save the calibration",
+            start_in(calibrations_folder(), "calibration.yaml"),
+            "Calibration (*.yaml *.yml)",
         )
         if path:
             self.save_to(path)
@@ -361,7 +365,9 @@ class ReviewPage(WizardPage):
     def _ask_export(self) -> None:
         kind = self.export_choice.currentData()
         title, name = EXPORTS[kind]
-        folder = self.saved.parent if self.saved is not None else Path.cwd()
+        folder = (
+            self.saved.parent if self.saved is not None else Path(start_in(calibrations_folder()))
+        )
         path, _ = QFileDialog.getSaveFileName(
             self, f"Export as {title}", str(folder / name), "YAML (*.yaml)"
         )

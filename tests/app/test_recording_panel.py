@@ -177,3 +177,65 @@ def test_sizes_read_as_an_operator_expects():
         "3.4 MB",
         "7.1 GB",
     ]
+
+
+def test_the_playback_box_says_what_plays_never_nothing_beside_a_running_bar(qtbot):
+    """The embedded venue replays its rendering: its nodes report a playback position
+    with no recording opened here; the box says what plays, beside the running bar."""
+    from app.widgets.recording_panel import LIVE_TEXT, REPLAYED_TEXT
+
+    panel = RecordingPanel()
+    qtbot.addWidget(panel)
+    assert panel.source_label.text() == LIVE_TEXT
+    panel.set_status(
+        "kinect2_0",
+        {
+            "role": "detector",
+            "fps": 12.0,
+            "values": {
+                "playback.paused": False,
+                "playback.position_s": 5.0,
+                "playback.duration_s": 20.0,
+            },
+        },
+    )
+    assert panel.pause_button.isEnabled() and panel.position.value() == 250
+    assert panel.source_label.text() == REPLAYED_TEXT
+    assert "nothing to play" not in panel.source_label.text()
+    panel.set_recording_path("/data/take-1")
+    assert panel.source_label.text() == "Playing /data/take-1"
+
+
+def test_file_dialogs_start_in_the_users_optrack_folders(qtbot, monkeypatch, tmp_path):
+    """The wizard's Save…, File → Open calibration… and Open recording… start in
+    ~/optrack-calibrations and ~/optrack-recordings (made when missing), never in the
+    folder the program was started from."""
+    from PySide6.QtWidgets import QFileDialog
+
+    from app.main_window import MainWindow
+    from app.wizard.wizard import CalibrationWizard
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    asked: list[str] = []
+
+    def file_dialog(parent, title, start, *rest):  # the operator cancels
+        asked.append(start)
+        return "", ""
+
+    def folder_dialog(parent, title, start, *rest):
+        asked.append(start)
+        return ""
+
+    monkeypatch.setattr(QFileDialog, "getSaveFileName", file_dialog)
+    monkeypatch.setattr(QFileDialog, "getOpenFileName", file_dialog)
+    monkeypatch.setattr(QFileDialog, "getExistingDirectory", folder_dialog)
+    wizard = CalibrationWizard(None, world_view=False)
+    qtbot.addWidget(wizard)
+    wizard.review_page._ask_save()
+    assert asked[-1] == str(tmp_path / "optrack-calibrations" / "calibration.yaml")
+    assert (tmp_path / "optrack-calibrations").is_dir()
+    window = MainWindow.__new__(MainWindow)  # the dialogs only: no site, no GL
+    MainWindow._ask_calibration(window)
+    assert asked[-1] == str(tmp_path / "optrack-calibrations")
+    MainWindow._ask_recording(window)
+    assert asked[-1] == str(tmp_path / "optrack-recordings")
