@@ -18,6 +18,7 @@ from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow, QWi
 
 from app.embedded_site import EmbeddedSite
 from app.folders import calibrations_folder, recordings_folder, start_in
+from app.help_menu import add_help_menu
 from app.source import NO_SITE, SiteSource, node_schemas
 from app.view_params import VIEW_PARAMS
 from app.widgets.log_panel import LogPanel, QtLogHandler
@@ -55,6 +56,7 @@ class MainWindow(QMainWindow):
         self.view_params = VIEW_PARAMS.create()
         self._panels()
         self._arrange_docks()
+        self._default_layout = self.saveState()  # View → Reset layout goes back to it
         self.site_label = QLabel(NO_SITE)
         self.site_label.setAlignment(Qt.AlignmentFlag.AlignLeft)
         self.statusBar().addWidget(self.site_label)
@@ -187,6 +189,16 @@ class MainWindow(QMainWindow):
         calibrate.setToolTip("Calibrate the site's sensors step by step (the calibration wizard).")
         calibrate.triggered.connect(self.open_wizard)
         calibration_menu.addAction(calibrate)
+        add_help_menu(self, view_menu, self.reset_layout)
+
+    def reset_layout(self) -> None:
+        """Every dock shown, docked and back where it was when the window opened."""
+        for dock in self.docks.values():
+            dock.setFloating(False)
+            dock.show()
+        self.restoreState(self._default_layout)
+        self.docks["Sensors"].raise_()
+        self.docks["Log"].raise_()
 
     # ------------------------------------------------------------------ source
     def set_source(self, source: SiteSource) -> None:

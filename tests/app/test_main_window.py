@@ -176,3 +176,39 @@ def test_a_calibration_file_shows_its_cameras_without_a_site(window, tmp_path):
     assert not window.open_calibration(str(tmp_path / "missing.yaml"))
     assert "missing.yaml" in window.log_panel.lines()[-1]
     assert "Error:" in window.log_panel.lines()[-1]
+
+
+def test_help_menu_lists_the_guides_shortcuts_version_and_folders(window):
+    from PySide6.QtWidgets import QMenu
+
+    from app.help_menu import about_text, shortcuts_text
+    from optrack import __version__
+
+    menus = {m.title().replace("&", ""): m for m in window.menuBar().findChildren(QMenu)}
+    assert {"File", "View", "Calibration", "Help", "Guides"} <= set(menus)
+    guides = menus["Guides"].actions()
+    assert guides[0].text() == "The operator window and the calibration wizard"
+    assert all(os.path.isfile(a.data()) for a in guides), [a.data() for a in guides]
+    help_titles = [a.text().replace("&", "") for a in menus["Help"].actions()]
+    assert help_titles[-2:] == ["Keyboard shortcuts", "About optrack"]
+    shortcuts = shortcuts_text(window)
+    assert "File → Quit" in shortcuts and "Guides → The operator window" in shortcuts
+    about = about_text()
+    assert __version__ in about
+    assert "optrack-calibrations" in about and "optrack-recordings" in about
+
+
+def test_view_reset_layout_brings_every_dock_back(qtbot, window):
+    from PySide6.QtCore import Qt
+
+    view = next(a.menu() for a in window.menuBar().actions() if a.text().replace("&", "") == "View")
+    reset = next(a for a in view.actions() if a.text().replace("&", "") == "Reset layout")
+    window.docks["Outputs"].hide()
+    window.docks["Tracks"].setFloating(True)
+    window.removeDockWidget(window.docks["Top view"])
+    reset.trigger()
+    qtbot.wait(50)
+    assert all(dock.isVisible() for dock in window.docks.values())
+    assert not window.docks["Tracks"].isFloating()
+    assert window.dockWidgetArea(window.docks["Top view"]) == Qt.DockWidgetArea.RightDockWidgetArea
+    assert window.dockWidgetArea(window.docks["Sensors"]) == Qt.DockWidgetArea.LeftDockWidgetArea
