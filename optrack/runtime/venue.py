@@ -52,12 +52,12 @@ def venue_uris(scenario: str, seed: int, start: float | None = None) -> list[str
     all on the clock that starts at ``start`` (now by default), looping forwards. Stale
     cached venues go (:func:`clean_stale_venues`)."""
     from optrack import __version__
-    from optrack.sim.world import Simulation
+    from optrack.sim.scenario import load_scenario
 
     root = _cache_root()
     if root.is_dir():
         clean_stale_venues(root, suffix=f"-v{__version__}-png{VENUE_FORMAT['png_compression']}")
-    ids = [sensor.id for sensor in Simulation(scenario, seed=seed, seconds=LIVE_LOOP_S).sensors]
+    ids = load_scenario(scenario).sensors.sensor_ids()  # without importing the renderer
     path = Path(scenario)
     if path.suffix.lower() in (".yaml", ".yml"):  # a file: sim:///abs/path.yaml/N
         scenario = str(path.resolve())

@@ -183,6 +183,17 @@ class SensorsSpec(_Spec):
     poses: list[SensorPose] = []
     clock_offset_max_s: float = 0.0
 
+    def model_names(self, count: int | None = None, model: str | None = None) -> list[str]:
+        """Each sensor's model, in order: ``model`` for every one when given, else
+        ``models`` repeated, else ``model``."""
+        count = self.count if count is None else count
+        names = [model] if model else (list(self.models) or [self.model])
+        return [names[k % len(names)] for k in range(count)]
+
+    def sensor_ids(self, count: int | None = None, model: str | None = None) -> list[str]:
+        """Each sensor's id: its model and its index (``kinect2_0``, ...)."""
+        return [f"{name}_{k}" for k, name in enumerate(self.model_names(count, model))]
+
 
 class PeopleSpec(_Spec):
     """Who walks in the venue. Routes go to the first people; then standing people,

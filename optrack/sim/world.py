@@ -235,10 +235,7 @@ class Simulation:
     ) -> list[SimSensor]:
         spec = self.scenario.sensors
         count = spec.count if count is None else count
-        if model_name:
-            names = [model_name]
-        else:
-            names = list(spec.models) or [spec.model]
+        names, ids = spec.model_names(count, model_name), spec.sensor_ids(count, model_name)
         poses: list[np.ndarray] = []
         if spec.poses and count <= len(spec.poses):
             for pose in spec.poses[:count]:
@@ -270,13 +267,12 @@ class Simulation:
         offsets = rng.uniform(-spec.clock_offset_max_s, spec.clock_offset_max_s, len(poses))
         phases = rng.random(len(poses))
         for k, pose in enumerate(poses):
-            name = names[k % len(names)]
-            model_type = MODELS[name]
+            model_type = MODELS[names[k]]
             model = model_type(params.get(model_type.schema.stage))
             sensors.append(
                 SimSensor(
                     index=k,
-                    id=f"{name}_{k}",
+                    id=ids[k],
                     model=model,
                     world_T_camera=pose,
                     clock_offset=float(offsets[k]) if spec.clock_offset_max_s > 0 else 0.0,

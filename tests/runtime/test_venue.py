@@ -35,3 +35,16 @@ def test_the_venue_uris_open_as_live_sensors_of_one_venue() -> None:
     assert [s.info.id for s in sensors] == ["kinect2_0", "kinect2_1", "kinect2_2"]
     assert all(s.loop and s.real_time and s.start_time == start for s in sensors)
     assert len({s.simulation.seed for s in sensors}) == 1
+
+
+def test_the_venue_ids_are_the_simulated_sensors_ids(tmp_path) -> None:
+    from optrack.sim.world import Simulation
+
+    scenario = tmp_path / "two_models.yaml"
+    scenario.write_text(
+        "venue: {size: [6.0, 5.0]}\nsensors: {count: 3, models: [kinect1, sr4500]}\n"
+    )
+    uris = venue_uris(str(scenario), 0)
+    ids = [dict(urllib.parse.parse_qsl(urllib.parse.urlsplit(u).query))["id"] for u in uris]
+    assert ids == [s.id for s in Simulation(str(scenario), seed=0).sensors]
+    assert ids == ["kinect1_0", "sr4500_1", "kinect1_2"]
