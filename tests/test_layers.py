@@ -16,7 +16,15 @@ REPO = Path(__file__).resolve().parent.parent
 
 # Bottom to top. A package's own ``cli.py`` belongs to the ``cli`` layer.
 LAYERS: list[set[str]] = [
-    {"optrack.types", "optrack.geometry", "optrack.params", "optrack.errors", "optrack.io", "optrack.lazy", "optrack.resources"},
+    {
+        "optrack.types",
+        "optrack.geometry",
+        "optrack.params",
+        "optrack.errors",
+        "optrack.io",
+        "optrack.lazy",
+        "optrack.resources",
+    },
     {"optrack.recording", "optrack.net"},
     {
         "optrack.sensors",
@@ -47,7 +55,9 @@ def unit_of(module: str) -> str:
         return "optrack"
     unit = ".".join(parts[:2])
     if unit not in RANK:
-        raise KeyError(f"{module} is in no layer; add its package to LAYERS in tests/test_layers.py")
+        raise KeyError(
+            f"{module} is in no layer; add its package to LAYERS in tests/test_layers.py"
+        )
     return unit
 
 
@@ -76,7 +86,9 @@ def imports_of(path: Path) -> list[tuple[int, str]]:
                 base = ".".join(anchor + ([base] if base else []))
             # "from optrack import sim" imports the package optrack.sim
             for alias in node.names:
-                found.append((node.lineno, f"{base}.{alias.name}" if base in ("optrack", "app") else base))
+                found.append(
+                    (node.lineno, f"{base}.{alias.name}" if base in ("optrack", "app") else base)
+                )
     return [(line, name) for line, name in found if name.split(".")[0] in ("optrack", "app")]
 
 
@@ -134,3 +146,27 @@ def test_no_cycle_between_packages():
 )
 def test_units_are_read_as_the_rule_says(module, unit):
     assert unit_of(module) == unit
+
+
+def test_no_module_over_600_lines():
+    """A module that grows past 600 lines holds more than one concept: split it."""
+    long = [
+        f"{path.relative_to(REPO)}: {len(path.read_text().splitlines())} lines"
+        for path in sources()
+        if len(path.read_text().splitlines()) > 600
+    ]
+    assert not long, "modules over 600 lines:\n" + "\n".join(long)
+
+
+def test_no_function_over_80_lines():
+    """A function past 80 lines does several things: give each its name."""
+    long = []
+    for path in sources():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                length = (node.end_lineno or node.lineno) - node.lineno + 1
+                if length > 80:
+                    long.append(
+                        f"{path.relative_to(REPO)}:{node.lineno} {node.name}: {length} lines"
+                    )
+    assert not long, "functions over 80 lines:\n" + "\n".join(long)
