@@ -590,4 +590,4 @@ class BodyModel:
             + y[:, :, None, :] * (ry * self._cyl_v[:, 1])[..., None]
             + axis[:, :, None, :] * z[None, None, :, None]
         )
-        return np.concatenate([head, limbs.reshape(n, -1, 3)], axis=1)
+        return np.concatenate([head, limbs.reshape(n, limbs.shape[1] * limbs.shape[2], 3)], axis=1)

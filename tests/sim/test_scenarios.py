@@ -106,3 +106,11 @@ def test_cli_refuses_impossible_overrides(tmp_path, capsys, option):
     code = main(["sim", "mixed", "--out", str(tmp_path / "out"), *option])
     assert code == 1
     assert option[0] in capsys.readouterr().err
+
+
+def test_a_venue_with_nobody_in_it_renders(tmp_path, capsys):
+    """`--people 0` is an empty room (a background recording), not a traceback."""
+    out = tmp_path / "empty"
+    args = ["sim", "crowd", "--people", "0", "--seconds", "0.2", "--sensors", "1"]
+    assert main([*args, "--out", str(out), "--json"]) == 0
+    assert '"people": 0' in capsys.readouterr().out
