@@ -169,6 +169,13 @@ class MainWindow(QMainWindow):
         open_recording.setToolTip("Play a recording through the embedded site (Recording dock).")
         open_recording.triggered.connect(self._ask_recording)
         file_menu.addAction(open_recording)
+        self.back_to_live = QAction("&Back to live sensors", self)
+        self.back_to_live.setToolTip("Stop playing the recording: the site's own sensors again.")
+        self.back_to_live.triggered.connect(lambda: self.recording_opener.back_to_live())
+        file_menu.addAction(self.back_to_live)
+        file_menu.aboutToShow.connect(
+            lambda: self.back_to_live.setEnabled(bool(self.recording.recording_path))
+        )
         file_menu.addSeparator()
         load = QAction("&Load parameter preset…", self)
         load.triggered.connect(self.parameters._ask_load)

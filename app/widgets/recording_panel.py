@@ -20,6 +20,7 @@ Every request runs on a worker thread of the source; its answer comes back on
 from __future__ import annotations
 
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -427,22 +428,64 @@ class RecordingOpener(QObject):
             window.log_panel.append("error", sentence)
             window.recording.show_message(sentence, error=True)
             return False
-        config = old.config if old is not None else self.config
         window.log_panel.append(
             "info",
             f"Playing {recording.path} ({len(recording.sensor_ids)} sensors: "
-            f"{', '.join(recording.sensor_ids)}) through the embedded site.",
+            f"{', '.join(recording.sensor_ids)}) through the embedded site: the site restarts "
+            "with the recording's sensors, so track IDs start again at 1; the outputs are "
+            "kept. File → Back to live sensors returns to the site's own sensors.",
         )
+        self._restart(str(recording.path))
+        return True
+
+    def back_to_live(self) -> bool:
+        """File → Back to live sensors: restart the embedded site with its own sensors
+        (the outputs kept); False when no recording plays here."""
+        window = self.window
+        if window.embedded_site is None or not window.recording.recording_path:
+            return False
+        window.log_panel.append(
+            "info", "Back to live sensors: the embedded site restarts with its own sensors."
+        )
+        self._restart(None)
+        return True
+
+    def _restart(self, path: str | None) -> None:
+        """Stop the embedded site (if one runs) and start it again playing ``path``
+        (None: its own sensors), with the outputs the window shows now."""
+        window = self.window
+        old = window.embedded_site
+        config = self._config_with_outputs(old.config if old is not None else self.config)
         self._leave_source()
+        window.recording.set_recording_path(path or "")  # the dock says it at once
         if old is not None and old.running:
             old.ended.disconnect()  # the window's "site stopped" message: not for this stop
-            old.ended.connect(lambda *_: self._start(str(recording.path), config))
+            old.ended.connect(lambda *_: self._start(path, config))
             old.process.terminate()
             kill_ms = int(1000 * max(window._site_stop_timeout_s, 1.0))
             QTimer.singleShot(kill_ms, lambda: old.running and old.process.kill())
         else:
-            self._start(str(recording.path), config)
-        return True
+            self._start(path, config)
+
+    def _config_with_outputs(self, config: str | None) -> str | None:
+        """``config`` with the destinations the Outputs dock shows turned on (those the
+        operator added live included), written next to the window's other state, so a
+        restarted site streams where this one did."""
+        import yaml
+
+        from optrack.outputs.streams import OUTPUT_KINDS
+        from optrack.outputs.udp import join_destinations
+
+        shown = [d for d in self.window.outputs.destinations if d.get("enabled", True)]
+        if not shown:
+            return config
+        data = yaml.safe_load(Path(config).read_text(encoding="utf-8")) if config else {}
+        outputs = dict((data or {}).get("outputs") or {})
+        for kind in OUTPUT_KINDS:
+            outputs[kind] = join_destinations(d["address"] for d in shown if d["kind"] == kind)
+        path = Path(tempfile.mkdtemp(prefix="optrack-window-")) / "site.yaml"
+        path.write_text(yaml.safe_dump({**(data or {}), "outputs": outputs}), encoding="utf-8")
+        return str(path)
 
     def _leave_source(self) -> None:
         from app.source import SiteSource
@@ -452,7 +495,7 @@ class RecordingOpener(QObject):
         previous.close()
         self.window.recording.reset()
 
-    def _start(self, path: str, config: str | None) -> None:
+    def _start(self, path: str | None, config: str | None) -> None:
         from app.bus_source import BusSource
         from app.embedded_site import EmbeddedSite
         from optrack.runtime.config import load_node_config
@@ -465,7 +508,8 @@ class RecordingOpener(QObject):
         command = [sys.executable, "-m", "optrack.cli", "run", "--headless"]
         if config:
             command += ["--config", config]
-        command += ["--recording", path, "--loop"]
+        if path:
+            command += ["--recording", path, "--loop"]
         site = EmbeddedSite(config, window, command=command)
         alive = threading.Event()
         alive.set()
@@ -475,11 +519,16 @@ class RecordingOpener(QObject):
             settings["bus"],
             window,
             retry_while=alive,
-            label=f"Recording {Path(path).name} on the embedded site '{name}'",
+            label=(
+                f"Playing {Path(path).name} on the embedded site '{name}' "
+                "(File → Back to live sensors)"
+                if path
+                else f"Live sensors of the embedded site '{name}'"
+            ),
         )
         window.run_embedded_site(site, stop_timeout_s=3 * float(settings["site"].stop_timeout_s))
         site.start()
         previous = window.source
         window.set_source(source)
         previous.close()
-        window.recording.set_recording_path(path)
+        window.recording.set_recording_path(path or "")

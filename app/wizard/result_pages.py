@@ -152,7 +152,7 @@ class RefinementPage(WizardPage):
                 f"The sensors disagree on where the person was by {before} before "
                 f"refinement and {100 * report.error_after_m:.1f} cm after."
                 if report.corrections
-                else "Nothing changed: the walk gave no correction to apply; the sensors "
+                else "Nothing changed: no correction from the walk was applied; the sensors "
                 f"disagree on where the person was by {before}."
             )
             + (

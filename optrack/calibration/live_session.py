@@ -511,7 +511,7 @@ class LiveSession:
                 f"Refined: sensors agree within {report.error_after_m * 100:.1f} cm "
                 f"(before: {report.error_before_m * 100:.1f} cm)."
                 if report.corrections
-                else "Nothing refined: the walk gave no correction to apply (sensors agree "
+                else "Nothing refined: no correction from the walk was applied (sensors agree "
                 f"within {report.error_before_m * 100:.1f} cm); the calibration is unchanged."
             )
             if report.refused:

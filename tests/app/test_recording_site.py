@@ -37,10 +37,43 @@ def test_a_recording_played_through_the_site_shows_tracks_and_its_playhead(qtbot
         ),
         timeout=60000,
     )
-    assert window.site_label.text().startswith(f"Recording {path.name} on the embedded site")
+    assert window.site_label.text().startswith(f"Playing {path.name} on the embedded site")
+    assert "Back to live sensors" in window.site_label.text()
     qtbot.waitUntil(lambda: sorted(window.recording.players) == sorted(sensors), timeout=10000)
     qtbot.waitUntil(lambda: "/ 4.0 s" in window.recording.position_label.text(), timeout=10000)
     assert all(f"{s} " in window.recording.rates.text() for s in sensors)
+
+
+def test_a_recording_keeps_the_outputs_and_one_action_goes_back_to_live(qtbot, window, site_config):
+    """Opening a recording says what it does to the site and keeps the outputs the
+    Outputs dock shows (one added live included); File → Back to live sensors restarts
+    the site with its own sensors, outputs kept again."""
+    import yaml
+
+    path = venue_recording(VENUE["scenario"], VENUE["seed"], VENUE["venue_seconds"])
+    window.outputs.set_destinations(
+        [
+            {"kind": "udp", "address": "127.0.0.1:21234", "enabled": True},
+            {"kind": "udp", "address": "127.0.0.1:29999", "enabled": True},
+            {"kind": "osc", "address": "127.0.0.1:7000", "enabled": False},
+        ]
+    )
+    assert not window.recording_opener.back_to_live()  # nothing plays here yet
+    assert window.open_recording(str(path))
+    said = window.log_panel.lines()[-1]
+    assert "track IDs start again at 1; the outputs are kept" in said
+    assert "File → Back to live sensors" in said
+    config = yaml.safe_load(open(window.embedded_site.config, encoding="utf-8"))
+    assert config["outputs"]["udp"] == "127.0.0.1:21234,127.0.0.1:29999"
+    assert config["outputs"]["osc"] == ""
+    assert config["site"] == yaml.safe_load(site_config.read_text())["site"]
+    qtbot.waitUntil(lambda: bool(window.recording.players), timeout=60000)
+    assert window.recording_opener.back_to_live()
+    assert window.recording.recording_path == ""
+    qtbot.waitUntil(lambda: window.site_label.text().startswith("Live sensors"), timeout=30000)
+    assert "--recording" not in window.embedded_site.command
+    live = yaml.safe_load(open(window.embedded_site.config, encoding="utf-8"))
+    assert live["outputs"]["udp"] == config["outputs"]["udp"]
 
 
 def test_opening_a_folder_that_is_not_a_recording_says_so(qtbot, window, tmp_path):

@@ -281,6 +281,6 @@ def test_a_refinement_that_changed_nothing_says_so_and_shows_no_after_plot(wizar
     )
     page.show_report(report)
     text = page.figure.text()
-    assert text.startswith("Nothing changed: the walk gave no correction to apply")
+    assert text.startswith("Nothing changed: no correction from the walk was applied")
     assert "3.1 cm on average" in text and "after" not in text
     assert page.after.isHidden()
