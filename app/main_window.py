@@ -429,6 +429,7 @@ class MainWindow(QMainWindow):
         if self.embedded_site is not None:
             self.statusBar().showMessage("Stopping the embedded site…")
             self.embedded_site.stop(self._site_stop_timeout_s)
+        self.recording_opener.close()
 
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt
         self.shut_down()

@@ -19,6 +19,7 @@ Every request runs on a worker thread of the source; its answer comes back on
 
 from __future__ import annotations
 
+import shutil
 import sys
 import tempfile
 import threading
@@ -407,6 +408,8 @@ class RecordingOpener(QObject):
         super().__init__(window)
         self.window = window
         self.config: str | None = None  # the site configuration when no site runs yet
+        self._written: Path | None = None  # the folder of the configs written for restarts
+        self._restarts = 0
 
     def open(self, path: str) -> bool:
         from optrack.recording import Recording
@@ -483,9 +486,18 @@ class RecordingOpener(QObject):
         outputs = dict((data or {}).get("outputs") or {})
         for kind in OUTPUT_KINDS:
             outputs[kind] = join_destinations(d["address"] for d in shown if d["kind"] == kind)
-        path = Path(tempfile.mkdtemp(prefix="optrack-window-")) / "site.yaml"
+        if self._written is None:
+            self._written = Path(tempfile.mkdtemp(prefix="optrack-window-"))
+        self._restarts += 1
+        path = self._written / f"site-{self._restarts}.yaml"
         path.write_text(yaml.safe_dump({**(data or {}), "outputs": outputs}), encoding="utf-8")
         return str(path)
+
+    def close(self) -> None:
+        """Remove the configurations written for restarts (the window closes)."""
+        if self._written is not None:
+            shutil.rmtree(self._written, ignore_errors=True)
+            self._written = None
 
     def _leave_source(self) -> None:
         from app.source import SiteSource

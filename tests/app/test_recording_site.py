@@ -4,6 +4,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from app.main_window import MainWindow
@@ -74,6 +76,9 @@ def test_a_recording_keeps_the_outputs_and_one_action_goes_back_to_live(qtbot, w
     assert "--recording" not in window.embedded_site.command
     live = yaml.safe_load(open(window.embedded_site.config, encoding="utf-8"))
     assert live["outputs"]["udp"] == config["outputs"]["udp"]
+    written = Path(window.embedded_site.config).parent
+    window.close()
+    assert not written.exists()  # the configurations written for restarts go with the window
 
 
 def test_opening_a_folder_that_is_not_a_recording_says_so(qtbot, window, tmp_path):
