@@ -224,6 +224,7 @@ def test_the_headless_wizard_calibrates_every_camera_of_a_simulated_site(site, p
     bus, live = _live_calibration(config, count)
     said: list[str] = []
     try:
+        assert live.state().message.startswith("Not capturing yet: the board and floor pages")
         plan = HeadlessPlan(out=str(tmp_path / "network.yaml"), extrinsics_s=240.0, publish=False)
         payload = calibrate_headless(live, plan, said.append)
     finally:
