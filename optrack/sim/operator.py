@@ -42,6 +42,7 @@ import yaml
 
 from optrack.calibration.board import Checkerboard
 from optrack.errors import UserError
+from optrack.io.files import atomic_write_text
 from optrack.net.bus import Bus
 from optrack.net.messages import CommandReply, CommandRequest
 from optrack.params import Param, Params, Schema, register
@@ -478,7 +479,8 @@ class SimulatedOperator:
         data = msgspec.to_builtins(derived)
         data.pop("name", None)
         path = self.run_dir / f"{order.scene}.yaml"
-        path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+        # whole or not at all: detector nodes load the scene as soon as the file appears
+        atomic_write_text(path, yaml.safe_dump(data, sort_keys=False))
         skip = 0.0
         if action == "lay_board":
             skip = self._skip_to(path, lambda step: step.kind == "floor")
