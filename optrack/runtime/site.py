@@ -187,13 +187,13 @@ class Site:
 
     def _children(self, uris: list[str], configs: dict[str, Path]) -> list[Child]:
         import optrack.sim.sensor  # noqa: F401 - registers sim://
-        from optrack.sensors.uri import parse_uri
+        from optrack.sensors.uri import expected_sensor_id
 
         children = []
         seen: set[str] = set()
         for k, uri in enumerate(uris):
-            parsed = parse_uri(uri)
-            name = parsed.sensor_id or parsed.fragment or f"sensor{k}"
+            # the node's own name (the one the operator and the wizard wait for)
+            name = expected_sensor_id(uri) or f"sensor{k}"
             if name in seen:
                 raise SiteError(
                     f"two sensors of site.sensors are both named '{name}'; give each a unique "

@@ -35,6 +35,7 @@ __all__ = [
     "SensorURI",
     "attached_summary",
     "open_sensor",
+    "expected_sensor_id",
     "parse_uri",
     "register_scheme",
     "schemes",
@@ -78,15 +79,35 @@ class Scheme:
     name: str
     form: str
     open: Opener
+    #: the id a URI's sensor will report, when it is known before the device opens
+    identify: Callable[[SensorURI], str | None] | None = None
 
 
 _SCHEMES: dict[str, Scheme] = {}
 
 
-def register_scheme(name: str, form: str, opener: Opener) -> None:
+def register_scheme(
+    name: str,
+    form: str,
+    opener: Opener,
+    identify: Callable[[SensorURI], str | None] | None = None,
+) -> None:
     """Open ``name://`` URIs with ``opener``; ``form`` shows how one is written, e.g.
-    ``sim://SCENARIO/N``. Registering a name again replaces its opener."""
-    _SCHEMES[name.lower()] = Scheme(name.lower(), form, opener)
+    ``sim://SCENARIO/N``; ``identify`` (optional) tells the id a URI's sensor will report
+    without opening it. Registering a name again replaces its opener."""
+    _SCHEMES[name.lower()] = Scheme(name.lower(), form, opener, identify)
+
+
+def expected_sensor_id(uri: str | SensorURI) -> str | None:
+    """The id the sensor of ``uri`` will report: its ``?id=``, else what its scheme
+    knows before opening it (a simulated venue's sensor), else its ``#fragment``
+    (a recording's sensor); None when only the device can tell (a camera's serial)."""
+    parsed = uri if isinstance(uri, SensorURI) else parse_uri(uri)
+    if parsed.sensor_id:
+        return parsed.sensor_id
+    scheme = _SCHEMES.get(parsed.scheme)
+    known = scheme.identify(parsed) if scheme is not None and scheme.identify else None
+    return known or parsed.fragment or None
 
 
 def schemes() -> tuple[str, ...]:

@@ -28,15 +28,17 @@ import math
 import time
 import urllib.parse
 from collections.abc import Mapping
+from typing import Any
 
 import msgspec
 
+from optrack.errors import UserError
 from optrack.params import Params
 from optrack.recording.format import GroundTruth, SensorInfo
 from optrack.sensors.base import Sensor, SensorError
 from optrack.sensors.uri import SensorURI, register_scheme
 from optrack.sim.board import BOARD_PARAMS
-from optrack.sim.scenario import Scenario
+from optrack.sim.scenario import Scenario, load_scenario
 from optrack.sim.world import Simulation, WorldState
 from optrack.types import RGBDFrame
 
@@ -52,6 +54,87 @@ def _operator_params(hold_seconds: float | None) -> dict | None:
     if hold_seconds is None:
         return None
     return {"sim_board": BOARD_PARAMS.create({"hold_seconds": hold_seconds})}
+
+
+def parse_sim_uri(text: str) -> tuple[str, int, dict[str, Any]]:
+    """The scenario, sensor number and :class:`SimulatedSensor` options of
+    ``sim://SCENARIO/N?option=value&...`` (see the module docstring)."""
+    parsed = urllib.parse.urlsplit(text)
+    if parsed.scheme != "sim":
+        raise SensorError(f"'{text}' is not a sim:// URI; write sim://SCENARIO/N.")
+    # sim:///abs/path/scenario.yaml/N names a scenario file by its absolute path.
+    absolute = not parsed.netloc and parsed.path.startswith("/")
+    target = (parsed.netloc + parsed.path).strip("/")
+    if absolute:
+        target = "/" + target
+    scenario, _, number = target.rpartition("/")
+    if not scenario or not number.isdigit():
+        raise SensorError(
+            f"sensor URI '{text}' must be sim://SCENARIO/N with N the sensor number (0, 1, ...)."
+        )
+    options = dict(urllib.parse.parse_qsl(parsed.query, keep_blank_values=True))
+    known = {
+        "seed",
+        "people",
+        "sensors",
+        "model",
+        "seconds",
+        "hold",
+        "realtime",
+        "noise",
+        "start",
+        "id",
+        "loop",
+    }
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise SensorError(
+            f"sensor URI '{text}' has unknown option '{unknown[0]}' "
+            f"(known: {', '.join(sorted(known))})."
+        )
+
+    def number_of(name: str, kind: type) -> int | float | None:
+        if name not in options:
+            return None
+        try:
+            value = kind(options[name])
+        except ValueError:
+            what = "a whole number" if kind is int else "a number"
+            raise SensorError(
+                f"sensor URI '{text}': {name} must be {what}; got '{options[name]}'."
+            ) from None
+        if kind is float and not math.isfinite(value):
+            raise SensorError(f"sensor URI '{text}': {name} must be finite.")
+        return value
+
+    def flag(name: str, default: bool) -> bool:
+        value = options.get(name)
+        if value is None:
+            return default
+        if value.lower() in _TRUE:
+            return True
+        if value.lower() in _FALSE:
+            return False
+        raise SensorError(f"sensor URI '{text}': {name} must be true or false; got '{value}'.")
+
+    return (
+        scenario,
+        int(number),
+        dict(
+            seed=int(number_of("seed", int) or 0),
+            people=number_of("people", int),  # type: ignore[arg-type]
+            sensors=number_of("sensors", int),  # type: ignore[arg-type]
+            sensor_model=options.get("model"),
+            seconds=number_of("seconds", float),
+            hold_seconds=number_of("hold", float),
+            real_time=flag("realtime", True),
+            noise=flag("noise", True),
+            start_time=number_of("start", float),
+            sensor_id=options.get("id") or None,
+            uri=text,
+            loop=flag("loop", False),
+        ),
+    )
 
 
 class SimulatedSensor(Sensor):
@@ -112,80 +195,8 @@ class SimulatedSensor(Sensor):
     @classmethod
     def from_uri(cls, text: str) -> SimulatedSensor:
         """A sensor from ``sim://SCENARIO/N?option=value&...`` (see the module docstring)."""
-        parsed = urllib.parse.urlsplit(text)
-        if parsed.scheme != "sim":
-            raise SensorError(f"'{text}' is not a sim:// URI; write sim://SCENARIO/N.")
-        # sim:///abs/path/scenario.yaml/N names a scenario file by its absolute path.
-        absolute = not parsed.netloc and parsed.path.startswith("/")
-        target = (parsed.netloc + parsed.path).strip("/")
-        if absolute:
-            target = "/" + target
-        scenario, _, number = target.rpartition("/")
-        if not scenario or not number.isdigit():
-            raise SensorError(
-                f"sensor URI '{text}' must be sim://SCENARIO/N with N the sensor number (0, 1, ...)."
-            )
-        options = dict(urllib.parse.parse_qsl(parsed.query, keep_blank_values=True))
-        known = {
-            "seed",
-            "people",
-            "sensors",
-            "model",
-            "seconds",
-            "hold",
-            "realtime",
-            "noise",
-            "start",
-            "id",
-            "loop",
-        }
-        unknown = sorted(set(options) - known)
-        if unknown:
-            raise SensorError(
-                f"sensor URI '{text}' has unknown option '{unknown[0]}' "
-                f"(known: {', '.join(sorted(known))})."
-            )
-
-        def number_of(name: str, kind: type) -> int | float | None:
-            if name not in options:
-                return None
-            try:
-                value = kind(options[name])
-            except ValueError:
-                what = "a whole number" if kind is int else "a number"
-                raise SensorError(
-                    f"sensor URI '{text}': {name} must be {what}; got '{options[name]}'."
-                ) from None
-            if kind is float and not math.isfinite(value):
-                raise SensorError(f"sensor URI '{text}': {name} must be finite.")
-            return value
-
-        def flag(name: str, default: bool) -> bool:
-            value = options.get(name)
-            if value is None:
-                return default
-            if value.lower() in _TRUE:
-                return True
-            if value.lower() in _FALSE:
-                return False
-            raise SensorError(f"sensor URI '{text}': {name} must be true or false; got '{value}'.")
-
-        return cls(
-            scenario,
-            int(number),
-            seed=int(number_of("seed", int) or 0),
-            people=number_of("people", int),  # type: ignore[arg-type]
-            sensors=number_of("sensors", int),  # type: ignore[arg-type]
-            sensor_model=options.get("model"),
-            seconds=number_of("seconds", float),
-            hold_seconds=number_of("hold", float),
-            real_time=flag("realtime", True),
-            noise=flag("noise", True),
-            start_time=number_of("start", float),
-            sensor_id=options.get("id") or None,
-            uri=text,
-            loop=flag("loop", False),
-        )
+        scenario, index, options = parse_sim_uri(text)
+        return cls(scenario, index, **options)
 
     # ----------------------------------------------------------- interface
     @property
@@ -259,4 +270,16 @@ def _open(uri: SensorURI, config: Mapping[str, Params]) -> SimulatedSensor:
     return SimulatedSensor.from_uri(uri.text)
 
 
-register_scheme("sim", "sim://SCENARIO/N", _open)
+def _identify(uri: SensorURI) -> str | None:
+    """The id sensor N of a simulated venue reports (``kinect2_1``), read from its
+    scenario without simulating it; None when the URI or the scenario cannot tell."""
+    try:
+        scenario, index, options = parse_sim_uri(uri.text)
+        spec = load_scenario(scenario).sensors
+        ids = spec.sensor_ids(options["sensors"], options["sensor_model"])
+    except UserError:
+        return None
+    return ids[index] if 0 <= index < len(ids) else None
+
+
+register_scheme("sim", "sim://SCENARIO/N", _open, _identify)

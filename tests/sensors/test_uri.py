@@ -59,3 +59,19 @@ def test_realsense_uri_without_pyrealsense2_says_how_to_install_it():
         pytest.skip("pyrealsense2 is installed")
     with pytest.raises(SensorError, match=r"pip install pyrealsense2"):
         open_sensor("realsense://817612070123")
+
+
+def test_the_id_a_sensor_will_report_is_known_before_it_opens():
+    """A site names each detector node by the id its sensor will report, so that the
+    wizard and the simulated operator wait for the node that actually answers."""
+    import optrack.sim.sensor  # noqa: F401 - registers sim://
+    from optrack.sensors.uri import expected_sensor_id
+
+    assert expected_sensor_id("sim://mixed/1") == "kinect2_1"
+    assert expected_sensor_id("sim://mixed/0?sensors=2&model=kinect1") == "kinect1_0"
+    assert expected_sensor_id("sim://mixed/0?id=cam0") == "cam0"
+    assert expected_sensor_id("sim://mixed/99") is None  # no such sensor: only opening tells
+    assert expected_sensor_id("file:///data/take#kinect2_0") == "kinect2_0"
+    assert expected_sensor_id("openni://") is None  # a camera's id comes from its serial
+    opened = optrack.sim.sensor.SimulatedSensor.from_uri("sim://mixed/1?realtime=false")
+    assert opened.info.id == expected_sensor_id("sim://mixed/1")
