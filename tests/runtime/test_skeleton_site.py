@@ -112,10 +112,15 @@ class SkeletonSite:
         assert {"HEAD", "NECK", "LEFT_WRIST", "RIGHT_ANKLE"} <= set(found[0]["joints"])
         assert 0.5 < found[0]["joints"]["HEAD"]["z"] < 2.3
         assert len(self.osc_joints()[0][1]) == 3  # x y z
-        status = self.statuses.get("skeleton")
-        assert status is not None and status.values["updates"] > 0
+        # statuses come once a second: the one seen may predate the first skeleton
+        self.wait(lambda: self._counted("skeleton", "updates"), 30, "no skeleton updates counted")
         for sensor in SENSORS:  # the detectors keep detecting
-            assert self.statuses[sensor].values["frames"] > 0
+            self.wait(lambda s=sensor: self._counted(s, "frames"), 30, f"no frames from {sensor}")
+
+    def _counted(self, node: str, key: str) -> bool:
+        with self.lock:
+            status = self.statuses.get(node)
+        return status is not None and status.values.get(key, 0) > 0
 
     def close(self) -> None:
         self._stop.set()
