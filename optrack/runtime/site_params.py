@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from optrack.params import Param, Schema, register
+from optrack.sim.venue_cache import RECORDED_VENUE
 
 __all__ = ["SITE_PARAMS"]
 
@@ -25,7 +26,7 @@ SITE_PARAMS = register(
             Param("seed", 0, min=0, max=2**31 - 1, step=1, help="Embedded venue: random seed."),
             Param(
                 "venue_seconds",
-                6.0,
+                RECORDED_VENUE["seconds"],
                 min=1.0,
                 max=600.0,
                 step=1.0,
@@ -35,7 +36,7 @@ SITE_PARAMS = register(
             ),
             Param(
                 "venue_max_age_s",
-                0.01,
+                RECORDED_VENUE["max_age_s"],
                 min=-1.0,
                 max=1.0,
                 step=0.005,

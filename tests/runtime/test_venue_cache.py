@@ -7,7 +7,7 @@ import os
 import time
 from pathlib import Path
 
-from optrack.runtime.venue import STALE_AFTER_S, clean_stale_venues
+from optrack.sim.venue_cache import STALE_AFTER_S, clean_stale_venues
 
 SUFFIX = "-v9.9.9-png0"
 
