@@ -54,6 +54,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         speed=getattr(args, "speed", 1.0),
         loop=getattr(args, "loop", False),
         skeleton=getattr(args, "skeleton", False),
+        nodes=getattr(args, "nodes", "all"),
     )
     return site.run()
 
@@ -89,6 +90,13 @@ def add_commands(commands: Any, command: Any) -> None:
         "--skeleton",
         action="store_true",
         help="track skeletons too (skeleton_live.enabled; a skeleton node is started)",
+    )
+    p.add_argument(
+        "--nodes",
+        choices=("all", "tracker", "detectors"),
+        default="all",
+        help="a site over several computers: start only this computer's part (tracker: "
+        "every node but the detectors; detectors: the detector nodes of site.sensors)",
     )
 
     node = add_group(

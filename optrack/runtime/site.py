@@ -112,8 +112,12 @@ class Site:
         speed: float = 1.0,
         loop: bool = False,
         skeleton: bool = False,
+        nodes: str = "all",
     ) -> None:
-        """``recording``: play it through the pipeline instead of ``site.sensors`` (one
+        """``nodes``: which of the site's nodes run on this computer (``all``; ``tracker``:
+        every node but the detectors; ``detectors``: only them), for a site spread over
+        several computers (docs/runtime.md, Several computers).
+        ``recording``: play it through the pipeline instead of ``site.sensors`` (one
         detector node per sensor, started paused and resumed together; ``speed`` times
         the recorded pace; ``loop`` plays it again at its end, else the site stops there).
         ``skeleton``: turn the skeleton stage on (``skeleton_live.enabled``: the
@@ -130,6 +134,7 @@ class Site:
             raise SiteError(f"--seconds must be > 0; got {seconds:g}.")
         self.headless = headless
         self.seconds = seconds
+        self.nodes = nodes
         self.children: list[Child] = []
         self.statuses: dict[str, StatusMessage] = {}
         self.hub: Bus | None = None
@@ -283,8 +288,12 @@ class Site:
         uris = self.sensor_uris()
         self._run_dir = Path(tempfile.mkdtemp(prefix="optrack-run-"))
         configs = self._write_configs(self._run_dir)
-        self.children = self._children(uris, configs)
-        if self.playback is None:
+        self.children = [
+            c
+            for c in self._children(uris, configs)
+            if self.nodes == "all" or (c.role == "detector") == (self.nodes == "detectors")
+        ]
+        if self.playback is None and self.nodes != "tracker":
             self._attach_operator(uris)
         order = ("tracker", "detector", "skeleton", "gui")  # the clock first
         for role in order:
