@@ -2,8 +2,10 @@
 
 Three Kinect v2 sensors of the simulated ``mixed`` venue, rendered once into
 a recording (cached), are played back at 30 Hz as live cameras by three
-detector node processes; the tracker node and the outputs node run as in
-``optrack run``; a UDP socket in this process receives the OpenPTrack JSON.
+detector node processes of a site that ``optrack run --headless`` starts from a
+config file, as a black box (:mod:`optrack.bench.site_process`); the tracker
+node sends the outputs as in ``optrack run``; a UDP socket in this process
+receives the OpenPTrack JSON, and the nodes' statuses come from the site's bus.
 The tracker node sends one tracks datagram per detection batch, stamped with
 the capture instant of the frame (in tracker time) whose detections it
 carries, and repeats the last one (same stamp) when no batch came for a
@@ -16,8 +18,8 @@ of detection: the frame waiting for a busy detector, and its decoding),
 ``detector_processing_ms``, ``detector_latency_ms`` (capture to detections
 published), ``tracker_latency_ms`` (capture to datagram sent, measured in
 the tracker node, which also sends the outputs). CPU use is read from
-``/proc`` for the launcher and every node process over the measured window
-(100 % is one core). Nothing is simulated faster or slower than real time:
+``/proc`` for the launcher and every process it started over the measured
+window (100 % is one core; this process, the receiver, is not counted). Nothing is simulated faster or slower than real time:
 when the computer cannot keep up, the detectors skip frames, and ``hz``,
 ``detector_hz`` and ``dropped_frames`` say so.
 """
@@ -32,19 +34,16 @@ import statistics
 import tempfile
 import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from optrack.bench.common import info
+from optrack.bench.site_process import LAUNCHER, SiteProcess, cpu_seconds, free_port
 from optrack.params import Param, Params, Schema
 from optrack.recording import Recording
-from optrack.runtime.config import load_node_config
-from optrack.runtime.site import Site
-from optrack.runtime.site_params import SITE_PARAMS
-from optrack.runtime.venue import venue_recording
+from optrack.sim.venue_cache import RECORDED_VENUE, venue_recording
 
 __all__ = ["E2E_BENCH", "e2e_bench"]
 
@@ -55,7 +54,7 @@ E2E_BENCH = Schema(
         Param("scenario", "mixed", help="Simulated venue (three Kinect v2)."),
         Param(
             "venue_seconds",
-            SITE_PARAMS["venue_seconds"].default,
+            RECORDED_VENUE["seconds"],
             min=1.0,
             max=600.0,
             unit="s",
@@ -81,16 +80,6 @@ E2E_BENCH = Schema(
     ],
     help="End-to-end latency benchmark.",
 )
-
-
-def _cpu_seconds(pid: int) -> float:
-    """User + system CPU time of a process, s (0 when it is gone)."""
-    try:
-        with open(f"/proc/{pid}/stat", encoding="ascii") as stat:
-            fields = stat.read().rsplit(")", 1)[1].split()
-    except (FileNotFoundError, ProcessLookupError, IndexError):
-        return 0.0
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _running(statuses: dict[str, Any], sensors: list[str]) -> bool:
@@ -146,19 +135,13 @@ class _Receiver:
         self.socket.close()
 
 
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
 def _site_values(
     venue: Path, sensors: list[str], state: str, udp: str, overrides: dict | None
 ) -> dict[str, dict[str, Any]]:
     """The site's configuration: the venue's sensors as ``optrack run`` starts them, its
     outputs to ``udp``, ``overrides`` laid over it."""
     values: dict[str, dict[str, Any]] = {
-        "bus": {"local_port": _free_port()},
+        "bus": {"local_port": free_port()},
         "site": {
             "name": "bench",
             "sensors": ",".join(f"file://{venue}?loop=bounce#{s}" for s in sensors),
@@ -167,7 +150,7 @@ def _site_values(
         # the detectors of the embedded venue, as 'optrack run' starts them
         "node": {
             "state_dir": state,
-            "replay_max_age_s": float(SITE_PARAMS["venue_max_age_s"].default),
+            "replay_max_age_s": float(RECORDED_VENUE["max_age_s"]),
         },
         "outputs": {"udp": udp},
     }
@@ -185,56 +168,60 @@ class _Window:
     elapsed: float
     statuses_before: dict[str, Any]
     statuses: dict[str, Any]
-    cpu: dict[str, float]  # CPU seconds of each process (by node name; "launcher": this one)
+    cpu: dict[str, float]  # CPU seconds by node name ("launcher": the launcher and the rest)
     roles: dict[str, str]
     restarts: int
 
 
-def _supervise(site: Site, seconds: float, done: Callable[[], bool] | None = None) -> None:
-    """Keep the site running for ``seconds`` (or until ``done()``)."""
-    end = time.monotonic() + seconds
-    while time.monotonic() < end and not (done is not None and done()):
-        site.supervise_once(time.monotonic())
-        time.sleep(0.1)
+def _cpu_by_name(
+    before: dict[int, float], after: dict[int, float], names: dict[int, str]
+) -> dict[str, float]:
+    """CPU seconds of each node over the window (by node name; ``launcher``: the launcher
+    and any other process it started). A process that ended meanwhile (a node restarted)
+    is not counted; see "restarts"."""
+    cpu: dict[str, float] = {LAUNCHER: 0.0}
+    for pid, seconds in sorted(before.items(), key=lambda item: names.get(item[0], LAUNCHER)):
+        name = names.get(pid, LAUNCHER)
+        cpu[name] = cpu.get(name, 0.0) + max(0.0, after.get(pid, 0.0) - seconds)
+    return cpu
 
 
-def _measure(site: Site, protocol: Params, sensors: list[str]) -> _Window:
+def _measure(site: SiteProcess, protocol: Params, sensors: list[str]) -> _Window:
     """Start the site, wait until every node runs, warm up, then measure the window."""
-    site.start()
-    pids = {"launcher": os.getpid()}
+    started = time.monotonic()
+    site.start(float(protocol.start_timeout_s))
     # Every node up and processing first (imports take long on a busy computer),
     # then the warm-up proper.
 
     def running() -> bool:
         return _running(site.statuses, sensors)
 
-    _supervise(site, float(protocol.start_timeout_s), running)
-    if not running():
+    left = float(protocol.start_timeout_s) - (time.monotonic() - started)
+    if not site.wait(left, running) or not running():
         info(
             "optrack bench e2e: not every node was running after "
             f"{float(protocol.start_timeout_s):g} s; measuring anyway."
         )
-    _supervise(site, float(protocol.warmup_s))
-    for child in site.children:
-        if child.pid is not None:
-            pids[child.name] = child.pid
-    cpu_before = {name: _cpu_seconds(pid) for name, pid in pids.items()}
-    restarts_before = sum(c.restarts for c in site.children)
+    site.wait(float(protocol.warmup_s))
+    names = site.pids()
+    cpu_before = {pid: cpu_seconds(pid) for pid in names}
+    restarts_before = site.restarts()
     t0_wall, t0 = time.time(), time.monotonic()
-    statuses_before = dict(site.statuses)
-    _supervise(site, float(protocol.seconds))
+    statuses_before = site.statuses
+    site.wait(float(protocol.seconds))
     elapsed = time.monotonic() - t0
-    # A node restarted meanwhile is not counted (its pid is gone); see "restarts".
-    cpu = {name: max(0.0, _cpu_seconds(pid) - cpu_before[name]) for name, pid in pids.items()}
+    cpu_after = {pid: cpu_seconds(pid) for pid in cpu_before}
+    statuses = site.statuses
+    names.update({pid: name for pid, name in site.pids().items() if name != LAUNCHER})
     return _Window(
         t0_wall=t0_wall,
         t1_wall=time.time(),
         elapsed=elapsed,
         statuses_before=statuses_before,
-        statuses=dict(site.statuses),
-        cpu=cpu,
-        roles={c.name: c.role for c in site.children},
-        restarts=sum(c.restarts for c in site.children) - restarts_before,
+        statuses=statuses,
+        cpu=_cpu_by_name(cpu_before, cpu_after, names),
+        roles={n: statuses[n].role for n in set(names.values()) if n in statuses},
+        restarts=site.restarts() - restarts_before,
     )
 
 
@@ -292,7 +279,7 @@ def _node_figures(window: _Window, sensors: list[str]) -> dict[str, Any]:
     detector_values = [statuses[s].values for s in sensors if s in statuses]
     by_role: dict[str, float] = {}
     for name, seconds in window.cpu.items():
-        role = window.roles.get(name, "launcher")
+        role = window.roles.get(name, LAUNCHER)
         by_role[role] = by_role.get(role, 0.0) + 100.0 * seconds / window.elapsed
     return {
         "detector_hz": [statuses[s].fps for s in sensors if s in statuses],
@@ -329,8 +316,7 @@ def e2e_bench(overrides: dict[str, dict[str, Any]] | None = None) -> dict[str, A
     try:
         with tempfile.TemporaryDirectory(prefix="optrack-bench-") as state:
             values = _site_values(Path(venue), sensors, state, receiver.address, overrides)
-            config = load_node_config(None, values)
-            site = Site(config, headless=True)
+            site = SiteProcess(values, state)
             receiver.start()
             load_before = os.getloadavg()
             info(
@@ -351,7 +337,7 @@ def e2e_bench(overrides: dict[str, dict[str, Any]] | None = None) -> dict[str, A
         "hz": statistics.median(fps),
         **_node_figures(window, sensors),
         "people": _people(recording),
-        "tracks_publish": str(config["node"].tracks_publish),
+        "tracks_publish": _tracks_publish(window, values),
         "cpu_cores": os.cpu_count(),
         "load_average_before": load_before[0],
         "seconds": window.elapsed,
@@ -359,3 +345,12 @@ def e2e_bench(overrides: dict[str, dict[str, Any]] | None = None) -> dict[str, A
         "recording": str(Path(venue)),
         "sensor_model": recording.sensors[sensors[0]].model,
     }
+
+
+def _tracks_publish(window: _Window, values: dict[str, dict[str, Any]]) -> str | None:
+    """How the tracker node sent tracks (``node.tracks_publish``, as its status reports)."""
+    tracker = window.statuses.get("tracker")
+    if tracker is not None and "tracks_publish" in tracker.params.get("node", {}):
+        return str(tracker.params["node"]["tracks_publish"])
+    chosen = values.get("node", {}).get("tracks_publish")
+    return None if chosen is None else str(chosen)

@@ -1,0 +1,67 @@
+"""A site measured as a black box (optrack.bench.site_process): the processes a launcher
+started and their CPU time from /proc, and a launcher that cannot start said in one
+sentence."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from optrack.bench.site_process import (
+    SiteProcess,
+    _children_by_parent,
+    cpu_seconds,
+    descendants,
+    free_port,
+)
+from optrack.errors import UserError
+
+# A child that starts a grandchild, prints its pid, then both wait to be ended.
+PARENT = (
+    "import subprocess, sys\n"
+    "g = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(60)'])\n"
+    "print(g.pid, flush=True)\n"
+    "g.wait()\n"
+)
+
+
+def test_descendants_are_children_and_their_children():
+    child = subprocess.Popen([sys.executable, "-c", PARENT], stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout is not None
+        grandchild = int(child.stdout.readline())
+        assert descendants(child.pid) == [grandchild]
+        assert set(descendants(os.getpid())) >= {child.pid, grandchild}
+        assert grandchild in _children_by_parent()[child.pid]  # where /proc has no children files
+        assert descendants(grandchild) == []
+    finally:
+        for pid in descendants(child.pid):
+            os.kill(pid, 9)
+        child.wait()
+
+
+def test_cpu_seconds_grow_while_a_process_works_and_are_zero_once_it_is_gone():
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        deadline = time.monotonic() + 30.0
+        while cpu_seconds(busy.pid) < 0.05 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert cpu_seconds(busy.pid) >= 0.05
+    finally:
+        busy.kill()
+        busy.wait()
+    assert cpu_seconds(busy.pid) == 0.0
+
+
+def test_a_launcher_that_refuses_its_config_is_one_sentence(tmp_path, capfd):
+    values = {"bus": {"local_port": free_port()}, "site": {"name": "bench", "report_s": -1.0}}
+    site = SiteProcess(values, tmp_path)
+    with pytest.raises(UserError, match=r"^'optrack run' ended at start \(exit status 1\)"):
+        site.start(120.0)
+    assert site.stop() == 1
+    assert "report_s" in capfd.readouterr().err  # the launcher's own sentence, on stderr
+    assert (tmp_path / "site.yaml").read_text().startswith("bus:\n  local_port:")
