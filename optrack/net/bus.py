@@ -23,7 +23,13 @@ from typing import Any, TypeVar
 import zenoh
 
 from optrack.errors import UserError
-from optrack.net.config import BUS_PARAMS, endpoints, local_endpoint, zenoh_config
+from optrack.net.config import (
+    BUS_PARAMS,
+    endpoints,
+    local_endpoint,
+    site_identity,
+    zenoh_config,
+)
 from optrack.net.keys import SiteKeys, check_name
 from optrack.net.messages import REJECT_REASONS, Message, MessageError, decode, encode
 
@@ -169,7 +175,10 @@ class Bus:
         self._lock = threading.Lock()
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._declared: list[Any] = []
-        self.session = _open_session(zenoh_config(self.params, host=host), self.params, host)
+        #: joined without keys (``bus.insecure``): anyone on the network may speak
+        self.insecure = not self.params.zenoh_config and site_identity(self.params, node) is None
+        config = zenoh_config(self.params, host=host, node=self.node)
+        self.session = _open_session(config, self.params, host)
         self._closed = False
         _open_buses.add(self)
 

@@ -11,8 +11,14 @@ Modes (``bus.mode``):
 * ``client``: connect to the router(s) in ``connect`` (e.g. a ``zenohd``).
 * ``router``: route for others, listening on ``listen``.
 
-``zenoh_config`` names a Zenoh JSON5 file used as it is instead (TLS,
-access control, namespaces...).
+Every link is mutual TLS with the site's keys (``bus.keys``, made by
+``optrack site init``; :mod:`optrack.net.security`), and Zenoh's access
+control limits what each identity may send. A ``local`` site without
+``bus.keys`` uses this user's own keys, made on first start; other modes
+without keys refuse to start unless ``bus.insecure`` is on.
+
+``zenoh_config`` names a Zenoh JSON5 file used as it is instead (namespaces,
+other authentication...).
 """
 
 from __future__ import annotations
@@ -23,9 +29,16 @@ from pathlib import Path
 import zenoh
 
 from optrack.errors import UserError
+from optrack.net.security import (
+    LOCAL_IDENTITY,
+    SiteIdentities,
+    access_control,
+    local_keys,
+    tls_settings,
+)
 from optrack.params import Param, Params, Schema, register
 
-__all__ = ["BUS_PARAMS", "BusConfigError", "endpoints", "zenoh_config"]
+__all__ = ["BUS_PARAMS", "BusConfigError", "endpoints", "site_identity", "zenoh_config"]
 
 BUS_PARAMS = register(
     Schema(
@@ -69,6 +82,25 @@ BUS_PARAMS = register(
                 help="Path of a Zenoh JSON5 configuration used as it is (overrides the rest).",
             ),
             Param(
+                "keys",
+                "",
+                help="Folder of the site's keys ('optrack site init'): every link uses mutual "
+                "TLS with them and each identity may send only what its role may; empty: a "
+                "local site uses this user's own keys, other modes refuse to start.",
+            ),
+            Param(
+                "identity",
+                "",
+                help="Whose certificate of bus.keys this process presents; empty: the node's "
+                "name (an operator station names its own).",
+            ),
+            Param(
+                "insecure",
+                False,
+                help="Let a peer/client/router node join without keys (no TLS, no access "
+                "control: anyone on the network may speak); every status says so.",
+            ),
+            Param(
                 "connect_timeout_s",
                 10.0,
                 min=0.0,
@@ -107,6 +139,10 @@ def endpoints(text: str) -> list[str]:
     return items
 
 
+#: Where a secured node listens when bus.listen is empty (Zenoh's defaults, over TLS).
+DEFAULT_LISTEN = {"peer": "tls/[::]:0", "router": "tls/[::]:7447"}
+
+
 def local_endpoint(params: Params) -> str:
     return f"tcp/127.0.0.1:{int(params.local_port)}"
 
@@ -115,8 +151,46 @@ def _set(config: zenoh.Config, key: str, value: object) -> None:
     config.insert_json5(key, json.dumps(value))
 
 
-def zenoh_config(params: Params, *, host: bool = False) -> zenoh.Config:
-    """The Zenoh configuration of a node. ``host``: this node hosts a local site's hub."""
+def _loopback(endpoint: str) -> bool:
+    return endpoint.split("/", 1)[1].startswith(("127.", "localhost", "[::1]"))
+
+
+def site_identity(params: Params, node: str = "") -> tuple[SiteIdentities, str] | None:
+    """The keys and the identity this node presents, or None when it joins without
+    (``bus.insecure``). A local site (or a client of a hub on this computer) without
+    ``bus.keys`` uses this user's own keys, made on first start."""
+    folder = str(params.keys).strip()
+    if folder:
+        identities = SiteIdentities(folder)
+        return identities, identities.require(str(params.identity).strip() or node)
+    mode = str(params.mode)
+    links = endpoints(str(params.listen)) + endpoints(str(params.connect))
+    on_this_computer = mode == "local" or (
+        mode == "client"
+        and links
+        and all(_loopback(e) for e in links)
+        and not bool(params.multicast_scouting)
+    )
+    if on_this_computer:
+        return SiteIdentities(local_keys()), LOCAL_IDENTITY
+    if bool(params.insecure):
+        return None
+    raise BusConfigError(
+        f"bus.mode {mode} without site keys would let anyone on the network join the site; "
+        "make keys with 'optrack site init', copy them here and set bus.keys, or start with "
+        "--insecure (bus.insecure) to run open."
+    )
+
+
+def _secured(items: list[str]) -> list[str]:
+    """Endpoints with every ``tcp/`` link made a TLS one."""
+    return [("tls/" + e[4:]) if e.startswith("tcp/") else e for e in items]
+
+
+def zenoh_config(params: Params, *, host: bool = False, node: str = "") -> zenoh.Config:
+    """The Zenoh configuration of node ``node``. ``host``: this node hosts a local site's
+    hub. With keys (:func:`site_identity`) every link is mutual TLS and the site's access
+    control applies."""
     if params.zenoh_config:
         path = Path(str(params.zenoh_config)).expanduser()
         if not path.is_file():
@@ -152,6 +226,13 @@ def zenoh_config(params: Params, *, host: bool = False) -> zenoh.Config:
             "bus.mode client needs bus.connect endpoints (or bus.multicast_scouting on) to find "
             "a router."
         )
+    identity = site_identity(params, node)
+    if identity is not None:
+        listen, connect = _secured(listen), _secured(connect)
+        if not listen and mode in DEFAULT_LISTEN:
+            listen = [DEFAULT_LISTEN[mode]]
+        _set(config, "transport/link/tls", tls_settings(*identity))
+        _set(config, "access_control", access_control(identity[0]))
     _set(config, "mode", mode)
     if listen or str(params.mode) == "local":
         _set(config, "listen/endpoints", listen)

@@ -1,4 +1,4 @@
-"""The runtime's commands: ``optrack run``, ``optrack node detect`` and ``optrack node track``.
+"""The runtime's commands: ``optrack run``, ``optrack node detect|track``, ``optrack site init``.
 
 Each handler (imported when its command runs, so that ``optrack --help`` stays
 fast) reads its options and starts what :mod:`optrack.runtime.process`
@@ -13,22 +13,57 @@ from typing import Any
 
 from optrack.cli import add_group
 
-__all__ = ["add_commands", "cmd_calibrate_live", "cmd_node_detect", "cmd_node_track", "cmd_run"]
+__all__ = [
+    "add_commands",
+    "cmd_calibrate_live",
+    "cmd_node_detect",
+    "cmd_node_track",
+    "cmd_run",
+    "cmd_site_init",
+]
+
+INSECURE_HELP = (
+    "join a peer/client/router bus without site keys (no TLS, no access control); every "
+    "status says so"
+)
 
 
 def cmd_node_detect(args: argparse.Namespace) -> int:
-    """``optrack node detect --sensor URI --site NAME [--config FILE]``."""
+    """``optrack node detect --sensor URI --site NAME [--config FILE] [--insecure]``."""
     from optrack.runtime.process import run_detector_node
 
-    return run_detector_node(args.sensor, args.site, args.config)
+    return run_detector_node(args.sensor, args.site, args.config, insecure=args.insecure)
 
 
 def cmd_node_track(args: argparse.Namespace) -> int:
-    """``optrack node track --site NAME [--config FILE]`` (with the outputs unless
-    ``node.outputs`` is off)."""
+    """``optrack node track --site NAME [--config FILE] [--insecure]`` (with the outputs
+    unless ``node.outputs`` is off)."""
     from optrack.runtime.process import run_tracker_node
 
-    return run_tracker_node(args.site, args.config)
+    return run_tracker_node(args.site, args.config, insecure=args.insecure)
+
+
+def cmd_site_init(args: argparse.Namespace) -> int:
+    """``optrack site init [--out DIR] [--nodes A,B] [--stations C] [--site NAME] [--json]``:
+    a site's authority and one certificate per node and operator station."""
+    from optrack.cli import emit_json, info
+    from optrack.net.security import SiteIdentities, init_site
+
+    def names(text: str | None) -> list[str]:
+        return [n.strip() for n in (text or "").split(",") if n.strip()]
+
+    made = init_site(args.out, names(args.nodes), names(args.stations), site=args.site)
+    identities = SiteIdentities(args.out)
+    if args.json:
+        emit_json({"folder": str(identities.folder), "made": made, "roles": identities.roles})
+    else:
+        described = ", ".join(f"{n} ({r})" for n, r in sorted(identities.roles.items()))
+        info(
+            f"{identities.folder}: made {len(made)} identit{'y' if len(made) == 1 else 'ies'}; "
+            f"it holds {described or 'no identity yet'}. Copy the folder to each computer of "
+            "the site and set bus.keys to it (keep ca-key.pem on this one only)."
+        )
+    return 0
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -111,6 +146,7 @@ def add_commands(commands: Any, command: Any) -> None:
     q.add_argument("--sensor", required=True, metavar="URI", help="sensor URI")
     q.add_argument("--site", required=True, help="site name")
     q.add_argument("--config", help="YAML configuration")
+    q.add_argument("--insecure", action="store_true", help=INSECURE_HELP)
     q = command(
         "track",
         "Tracker node: all detections in, tracks out.",
@@ -119,6 +155,25 @@ def add_commands(commands: Any, command: Any) -> None:
     )
     q.add_argument("--site", required=True, help="site name")
     q.add_argument("--config", help="YAML configuration")
+    q.add_argument("--insecure", action="store_true", help=INSECURE_HELP)
+
+    site = add_group(commands, "site", "A site's keys.", "site_command", "STEP")
+    q = command(
+        "init",
+        "Make a site's keys: an authority, one certificate per node and operator station.",
+        "optrack.runtime.cli:cmd_site_init",
+        site,
+    )
+    q.add_argument("--out", default="site-keys", metavar="DIR", help="folder (default site-keys)")
+    q.add_argument(
+        "--nodes",
+        metavar="NAME,...",
+        help="node names: tracker, skeleton, outputs, site (the launcher) or a sensor's id "
+        "(a detector node)",
+    )
+    q.add_argument("--stations", metavar="NAME,...", help="operator stations (GUI computers)")
+    q.add_argument("--site", default="site", help="site name written in the certificates")
+    q.add_argument("--json", action="store_true", help="print what was made as JSON")
 
 
 def cmd_calibrate_live(args: argparse.Namespace) -> int:

@@ -185,12 +185,15 @@ def detection_params_for(info: SensorInfo, config: NodeConfig) -> Params:
 # ------------------------------------------------------------------ nodes
 
 
-def run_detector_node(sensor_uri: str, site: str, config_path: str | None = None) -> int:
-    """A detector node (``optrack node detect``): read one sensor, detect, publish."""
+def run_detector_node(
+    sensor_uri: str, site: str, config_path: str | None = None, insecure: bool = False
+) -> int:
+    """A detector node (``optrack node detect``): read one sensor, detect, publish.
+    ``insecure``: ``bus.insecure`` on (``--insecure``)."""
     from optrack.runtime.detector_node import DetectorNode
     from optrack.runtime.replay import LiveReplay
 
-    config = load_node_config(config_path)
+    config = load_node_config(config_path, {"bus": {"insecure": True}} if insecure else None)
     check_name("site", site)
     nice(config["node"])
     clock = local_clock(config["clock"])
@@ -230,13 +233,13 @@ def run_detector_node(sensor_uri: str, site: str, config_path: str | None = None
     return finish(code)
 
 
-def run_tracker_node(site: str, config_path: str | None = None) -> int:
+def run_tracker_node(site: str, config_path: str | None = None, insecure: bool = False) -> int:
     """The tracker node (``optrack node track``), with the outputs in its process unless
-    ``node.outputs`` is off."""
+    ``node.outputs`` is off. ``insecure``: ``bus.insecure`` on (``--insecure``)."""
     from optrack.runtime.outputs_node import OutputsNode
     from optrack.runtime.tracker_node import TrackerNode
 
-    config = load_node_config(config_path)
+    config = load_node_config(config_path, {"bus": {"insecure": True}} if insecure else None)
     check_name("site", site)
     nice(config["node"])
     setup_logging("optrack node track")

@@ -171,6 +171,7 @@ class Site:
         common.setdefault("bus", {}).update(
             {"mode": "client", "connect": endpoint, "multicast_scouting": False, "gossip": False}
         )
+        common["bus"].pop("identity", None)  # each node presents its own (bus.keys)
         common.setdefault("node", {})["state_dir"] = str(state_dir(self.config, self.name))
         common["outputs"] = self.config["outputs"].as_dict()
         paths = {}

@@ -41,7 +41,7 @@ def test_site_name_is_checked():
 def test_local_hub_listens_on_loopback_only_and_does_not_scout():
     config = zenoh_config(BUS_PARAMS.create({"local_port": 17111}), host=True)
     assert get(config, "mode") == "router"
-    assert get(config, "listen/endpoints") == ["tcp/127.0.0.1:17111"]
+    assert get(config, "listen/endpoints") == ["tls/127.0.0.1:17111"]  # mutual TLS
     assert get(config, "connect/endpoints") == []
     assert get(config, "scouting/multicast/enabled") is False
     assert get(config, "scouting/gossip/enabled") is False
@@ -50,7 +50,7 @@ def test_local_hub_listens_on_loopback_only_and_does_not_scout():
 def test_local_node_is_a_client_of_the_loopback_hub():
     config = zenoh_config(BUS_PARAMS.create({"local_port": 17111}))
     assert get(config, "mode") == "client"
-    assert get(config, "connect/endpoints") == ["tcp/127.0.0.1:17111"]
+    assert get(config, "connect/endpoints") == ["tls/127.0.0.1:17111"]
     assert get(config, "listen/endpoints") == []
     assert get(config, "scouting/multicast/enabled") is False
 
@@ -65,6 +65,7 @@ def test_peer_mode_takes_endpoints_and_scouting_from_the_config():
         BUS_PARAMS.create(
             {
                 "mode": "peer",
+                "insecure": True,
                 "connect": "tcp/192.168.1.10:7447, tcp/192.168.1.11:7447",
                 "listen": "tcp/0.0.0.0:7447",
                 "multicast_scouting": False,
@@ -79,7 +80,7 @@ def test_peer_mode_takes_endpoints_and_scouting_from_the_config():
 
 
 def test_peer_mode_scouts_by_default():
-    config = zenoh_config(BUS_PARAMS.create({"mode": "peer"}))
+    config = zenoh_config(BUS_PARAMS.create({"mode": "peer", "insecure": True}))
     assert get(config, "scouting/multicast/enabled") is True
 
 
