@@ -29,10 +29,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import socket
 import statistics
 import tempfile
-import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -40,7 +38,13 @@ from typing import Any
 import numpy as np
 
 from optrack.bench.common import info
-from optrack.bench.site_process import LAUNCHER, SiteProcess, cpu_seconds, free_port
+from optrack.bench.site_process import (
+    LAUNCHER,
+    DatagramReceiver,
+    SiteProcess,
+    cpu_seconds,
+    free_port,
+)
 from optrack.params import Param, Params, Schema
 from optrack.recording import Recording
 from optrack.sim.venue_cache import RECORDED_VENUE, venue_recording
@@ -99,40 +103,6 @@ def _people(recording: Any) -> int | None:
 
 def _percentile(values: list[float], q: float) -> float:
     return float(np.percentile(np.asarray(values), q)) if values else float("nan")
-
-
-class _Receiver:
-    """A UDP socket on 127.0.0.1 that keeps every datagram with its arrival time."""
-
-    def __init__(self) -> None:
-        self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.socket.bind(("127.0.0.1", 0))
-        self.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-        self.arrivals: list[tuple[float, bytes]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._receive, daemon=True)
-
-    @property
-    def address(self) -> str:
-        return f"127.0.0.1:{self.socket.getsockname()[1]}"
-
-    def start(self) -> None:
-        self._thread.start()
-
-    def _receive(self) -> None:
-        self.socket.settimeout(0.2)
-        while not self._stop.is_set():
-            try:
-                data = self.socket.recv(65536)
-            except TimeoutError:
-                continue
-            self.arrivals.append((time.time(), data))
-
-    def close(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(2.0)
-        self.socket.close()
 
 
 def _site_values(
@@ -312,7 +282,7 @@ def e2e_bench(overrides: dict[str, dict[str, Any]] | None = None) -> dict[str, A
     recording = Recording(venue)
     sensors = recording.sensor_ids
     fps = [float(recording.sensors[s].fps or 0.0) for s in sensors]
-    receiver = _Receiver()
+    receiver = DatagramReceiver()
     try:
         with tempfile.TemporaryDirectory(prefix="optrack-bench-") as state:
             values = _site_values(Path(venue), sensors, state, receiver.address, overrides)

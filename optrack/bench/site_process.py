@@ -31,6 +31,7 @@ from optrack.net.messages import StatusMessage
 
 __all__ = [
     "LAUNCHER",
+    "DatagramReceiver",
     "SiteProcess",
     "cpu_seconds",
     "descendants",
@@ -107,6 +108,41 @@ def descendants(pid: int) -> list[int]:
     return found
 
 
+class DatagramReceiver:
+    """A UDP socket on 127.0.0.1 that keeps every datagram with its arrival time (a site's
+    outputs to ``address``), from :meth:`start` to :meth:`close`."""
+
+    def __init__(self) -> None:
+        self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.socket.bind(("127.0.0.1", 0))
+        self.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        self.arrivals: list[tuple[float, bytes]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._receive, daemon=True)
+
+    @property
+    def address(self) -> str:
+        return f"127.0.0.1:{self.socket.getsockname()[1]}"
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def _receive(self) -> None:
+        self.socket.settimeout(0.2)
+        while not self._stop.is_set():
+            try:
+                data = self.socket.recv(65536)
+            except TimeoutError:
+                continue
+            self.arrivals.append((time.time(), data))
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(2.0)
+        self.socket.close()
+
+
 def _bus_params(port: int, timeout_s: float) -> Any:
     """A client of the local site's hub on ``port``, as the site's own nodes connect."""
     return BUS_PARAMS.create(
@@ -144,16 +180,8 @@ class SiteProcess:
     # ---------------------------------------------------------------- start
     @property
     def argv(self) -> list[str]:
-        return [
-            sys.executable,
-            "-m",
-            "optrack.cli",
-            "run",
-            "--headless",
-            "--config",
-            str(self.config),
-            *self.args,
-        ]
+        command = ["run", "--headless", "--config", str(self.config), *self.args]
+        return [sys.executable, "-m", "optrack.cli", *command]
 
     def start(self, timeout_s: float) -> None:
         """Write the config, start the launcher (its output on this process's stderr) and

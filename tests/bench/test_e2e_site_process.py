@@ -4,7 +4,9 @@ sentence."""
 
 from __future__ import annotations
 
+import json
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -12,6 +14,7 @@ import time
 import pytest
 
 from optrack.bench.site_process import (
+    DatagramReceiver,
     SiteProcess,
     _children_by_parent,
     cpu_seconds,
@@ -65,3 +68,24 @@ def test_a_launcher_that_refuses_its_config_is_one_sentence(tmp_path, capfd):
     assert site.stop() == 1
     assert "report_s" in capfd.readouterr().err  # the launcher's own sentence, on stderr
     assert (tmp_path / "site.yaml").read_text().startswith("bus:\n  local_port:")
+
+
+def test_the_receiver_keeps_every_datagram_with_its_arrival_time():
+    receiver = DatagramReceiver()
+    receiver.start()
+    host, port = receiver.address.split(":")
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+            for k in range(3):
+                sender.sendto(json.dumps({"sec": k}).encode(), (host, int(port)))
+            deadline = time.monotonic() + 5.0
+            while len(receiver.arrivals) < 3 and time.monotonic() < deadline:
+                time.sleep(0.01)
+    finally:
+        receiver.close()
+    assert [json.loads(data)["sec"] for _, data in receiver.arrivals] == [
+        0,
+        1,
+        2,
+    ]
+    assert all(abs(arrived - time.time()) < 10 for arrived, _ in receiver.arrivals)
