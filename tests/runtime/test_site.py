@@ -7,139 +7,43 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
-import threading
 import time
 
 import pytest
-import yaml
-from pythonosc.dispatcher import Dispatcher
-from pythonosc.osc_server import ThreadingOSCUDPServer
 from websockets.sync.client import connect
 
-from optrack.net.bus import Bus
-from optrack.net.config import BUS_PARAMS
-from optrack.net.messages import DetectionsMessage, StatusMessage
+from optrack.net.messages import DetectionsMessage
 from optrack.recording import Recording
 
-from .conftest import VENUE_SECONDS, Processes, free_port
+from .conftest import VENUE_SECONDS, free_port
+from .sites import RunningSite, venue_sensors
 
 SENSORS = ("kinect2_0", "kinect2_1", "kinect2_2")
 
 
-class Site:
-    """A running `optrack run` and the clients listening to it."""
+class Site(RunningSite):
+    """A running `optrack run` on the venue's three sensors with every output, and the
+    detections on its bus."""
 
     def __init__(self, venue, tmp_path) -> None:
-        self.udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.udp.bind(("127.0.0.1", 0))
-        self.lock = threading.Lock()
-        self.datagrams: list[tuple[float, bytes]] = []
-        self.osc: list[tuple[float, str, tuple]] = []
-        self.detections: list[tuple[float, str]] = []
-        self.statuses: dict[str, StatusMessage] = {}
-        dispatcher = Dispatcher()
-        dispatcher.set_default_handler(
-            lambda address, *args: self._add(self.osc, (time.time(), address, args))
-        )
-        self.osc_server = ThreadingOSCUDPServer(("127.0.0.1", 0), dispatcher)
-        self.port = free_port()
         self.websocket_port = free_port()
-        uris = ",".join(f"file://{venue}?loop=bounce#{s}" for s in SENSORS)
-        config = tmp_path / "site.yaml"
-        config.write_text(
-            yaml.safe_dump(
-                {
-                    "bus": {"local_port": self.port},
-                    "site": {
-                        "name": "sitetest",
-                        "sensors": uris,
-                        "report_s": 2.0,
-                        "restart_delay_s": 0.2,
-                    },
-                    "node": {"state_dir": str(tmp_path / "state"), "status_period_s": 0.5},
-                    "outputs": {
-                        "osc": f"127.0.0.1:{self.osc_server.server_address[1]}",
-                        "websocket": f"127.0.0.1:{self.websocket_port}",
-                    },
-                }
-            )
-        )
-        self.processes = Processes(tmp_path)
-        self.launcher = self.processes.start(
-            [
-                "optrack.cli",
-                "run",
-                "--headless",
-                "--seconds",
-                "240",
-                "--config",
-                str(config),
-                "--udp",
-                f"127.0.0.1:{self.udp.getsockname()[1]}",
-            ],
-            "launcher",
-        )
-        self._stop = threading.Event()
-        self._threads = [
-            threading.Thread(target=self._receive, daemon=True),
-            threading.Thread(target=self.osc_server.serve_forever, daemon=True),
-        ]
-        for thread in self._threads:
-            thread.start()
-        self.bus = Bus(
-            "sitetest",
-            "observer",
-            BUS_PARAMS.create({"local_port": self.port, "connect_timeout_s": 120.0}),
-        )
+        self.detections: list[tuple[float, str]] = []
+        values = {
+            "site": {
+                "name": "sitetest",
+                "sensors": venue_sensors(venue, SENSORS),
+                "report_s": 2.0,
+                "restart_delay_s": 0.2,
+            },
+            "node": {"state_dir": str(tmp_path / "state"), "status_period_s": 0.5},
+            "outputs": {"websocket": f"127.0.0.1:{self.websocket_port}"},
+        }
+        super().__init__(tmp_path, values)
         self.bus.subscribe(
             self.bus.keys.detections(),
             DetectionsMessage,
             lambda m, k: self._add(self.detections, (time.time(), m.sender)),
         )
-        self.bus.subscribe(self.bus.keys.status(), StatusMessage, self._on_status)
-
-    def _add(self, where: list, item) -> None:
-        with self.lock:
-            where.append(item)
-
-    def _on_status(self, message: StatusMessage, key: str) -> None:
-        with self.lock:
-            self.statuses[message.node] = message
-
-    def _receive(self) -> None:
-        self.udp.settimeout(0.2)
-        while not self._stop.is_set():
-            try:
-                data = self.udp.recv(65536)
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            self._add(self.datagrams, (time.time(), data))
-
-    def documents(self, since: float = 0.0) -> list[tuple[float, dict]]:
-        with self.lock:
-            return [(t, json.loads(d)) for t, d in self.datagrams if t >= since]
-
-    def wait(self, predicate, timeout: float, what: str) -> None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            assert self.launcher.poll() is None, self.processes.output(self.launcher)[-3000:]
-            if predicate():
-                return
-            time.sleep(0.05)
-        raise AssertionError(
-            f"{what} within {timeout} s\n{self.processes.output(self.launcher)[-3000:]}"
-        )
-
-    def close(self) -> None:
-        self._stop.set()
-        self.processes.stop_all()
-        self.bus.close()
-        self.osc_server.shutdown()
-        self.osc_server.server_close()
-        self.udp.close()
 
 
 @pytest.fixture(scope="module")
