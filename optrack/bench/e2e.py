@@ -19,9 +19,10 @@ of detection: the frame waiting for a busy detector, and its decoding),
 published), ``tracker_latency_ms`` (capture to datagram sent, measured in
 the tracker node, which also sends the outputs). CPU use is read from
 ``/proc`` for the launcher and every process it started over the measured
-window (100 % is one core; this process, the receiver, is not counted). Nothing is simulated faster or slower than real time:
-when the computer cannot keep up, the detectors skip frames, and ``hz``,
-``detector_hz`` and ``dropped_frames`` say so.
+window (100 % is one core; this process, the receiver, is not counted).
+Nothing is simulated faster or slower than real time: when the computer
+cannot keep up, the detectors skip frames, and ``hz``, ``detector_hz`` and
+``dropped_frames`` say so.
 """
 
 from __future__ import annotations
