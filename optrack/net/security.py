@@ -364,14 +364,10 @@ def _own_keys(role: str, name: str) -> tuple[list[str], list[str]]:
     return put, answer
 
 
-def access_control(identities: SiteIdentities) -> dict[str, Any]:
-    """Zenoh's ``access_control`` for the site: deny by default; everyone of the site may
-    subscribe, receive anything and ask for the clock and the calibration; an operator
-    (station, launcher) may do anything on the site's keys; any other identity puts and
-    answers only on its own keys."""
+def _common_rules() -> list[dict[str, Any]]:
+    """The rules every identity of the site shares, and the operators' one."""
     every = f"{ROOT}/**"
-    everyone = [{"id": f"id-{name}", "cert_common_names": [name]} for name in identities.roles]
-    rules: list[dict[str, Any]] = [
+    return [
         {
             "id": "receive",
             "messages": ["put", "delete", "query", "reply", "declare_subscriber"]
@@ -403,6 +399,15 @@ def access_control(identities: SiteIdentities) -> dict[str, Any]:
             "key_exprs": [every],
         },
     ]
+
+
+def access_control(identities: SiteIdentities) -> dict[str, Any]:
+    """Zenoh's ``access_control`` for the site: deny by default; everyone of the site may
+    subscribe, receive anything and ask for the clock and the calibration; an operator
+    (station, launcher) may do anything on the site's keys; any other identity puts and
+    answers only on its own keys."""
+    everyone = [{"id": f"id-{name}", "cert_common_names": [name]} for name in identities.roles]
+    rules = _common_rules()
     policies: list[dict[str, Any]] = [
         {
             "id": "everyone",

@@ -21,7 +21,7 @@ from typing import Any
 from optrack.net.messages import DestinationStatus
 from optrack.outputs import openptrack_json, osc
 from optrack.outputs.udp import MODES, Destination, UdpSender, parse_address, parse_destinations
-from optrack.outputs.websocket import WebSocketServer
+from optrack.outputs.websocket import DEFAULT_ORIGINS, WebSocketServer
 from optrack.params import Param, Params, Schema, register
 from optrack.types import SkeletonBatch, TrackBatch
 
@@ -110,6 +110,18 @@ OUTPUTS_PARAMS = register(
                 help="WebSocket server address HOST:PORT for browsers "
                 f"(port {DEFAULT_WEBSOCKET_PORT} when left out; 0: any free port); empty: off.",
             ),
+            Param(
+                "websocket_origins",
+                ",".join(DEFAULT_ORIGINS),
+                help="Comma-separated origins of the web pages that may connect to the "
+                "WebSocket output (scheme://host[:port]; without a port: any port of that host; "
+                "'null': pages opened from a file; '*': any page).",
+            ),
+            Param(
+                "websocket_token",
+                "",
+                help="When set, a WebSocket client must give it in its URL (?token=...).",
+            ),
         ],
         help="Where tracks go: OpenPTrack JSON over UDP, OSC and WebSocket.",
     )
@@ -156,7 +168,11 @@ class Outputs:
                     updated.multicast_interface,
                 ),
                 "osc": updated.osc,
-                "websocket": updated.websocket,
+                "websocket": (
+                    updated.websocket,
+                    updated.websocket_origins,
+                    updated.websocket_token,
+                ),
             }
             udp, osc_sender, websocket = self._udp, self._osc, self._websocket
             created: list[UdpSender] = []
@@ -198,7 +214,14 @@ class Outputs:
                         if self._websocket is not None:
                             self._websocket.close()  # free the port before binding it again
                             self._websocket = None
-                        websocket = WebSocketServer(host, port)
+                        origins = [
+                            o.strip()
+                            for o in str(updated.websocket_origins).split(",")
+                            if o.strip()
+                        ]
+                        websocket = WebSocketServer(
+                            host, port, origins=origins, token=str(updated.websocket_token)
+                        )
             except BaseException:
                 for sender in created:
                     sender.close()

@@ -69,6 +69,12 @@ NODE_PARAMS = register(
                 "$XDG_STATE_HOME/optrack/<site> (~/.local/state/optrack/<site>).",
             ),
             Param(
+                "data_folder",
+                "~/optrack-recordings",
+                help="The site's data folder: a node writes recordings (record_start) only "
+                "inside it and refuses any other folder.",
+            ),
+            Param(
                 "outputs",
                 True,
                 help="The tracker node sends the outputs itself, straight from its loop (off "

@@ -223,6 +223,8 @@ class Node:
             "request": self.request,
         }
         fields.update(self.status_fields())
+        if self.bus.insecure:  # joined without keys (--insecure): every status says so
+            fields["values"] = {**fields.get("values", {}), "insecure": True}
         return StatusMessage(**fields)
 
     def publish_status(self) -> None:

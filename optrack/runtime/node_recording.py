@@ -10,7 +10,8 @@ Node side (each detector node, on its own computer):
   and are counted as dropped when it is full. Frames are stamped in tracker
   time, so the sensors of a take share one clock. Each frame's index line is
   written last, so a node that crashes loses nothing already written. Its
-  status values: ``recording``, ``recording.folder``, ``recording.frames``,
+  status values: ``recording``, ``recording.folder``, ``recording.refused``
+  (folders outside the site's data folder, ``node.data_folder``), ``recording.frames``,
   ``recording.bytes``, ``recording.seconds``, ``recording.dropped``,
   ``recording.error``.
 * :class:`NodePlayback` answers ``playback {action: pause | resume | step |
@@ -146,6 +147,7 @@ class NodeRecorder:
         self.bytes = 0
         self.dropped = 0
         self.error = ""
+        self.refused = 0  # record_start into a folder outside the site's data folder
         self._first_t: float | None = None
         self._last_t: float | None = None
         self._lock = threading.Lock()
@@ -174,7 +176,7 @@ class NodeRecorder:
                     f"sensor '{self.info.id}' is already recording into {self.folder}; stop "
                     "that recording first."
                 )
-            path = Path(folder).expanduser()
+            path = self._inside_data_folder(folder)
             info = self.info
             pose = getattr(self.node, "world_T_camera", None)  # kept with the take
             if pose is not None:
@@ -198,6 +200,19 @@ class NodeRecorder:
             self._thread.start()
         self.node.log.info("recording sensor '%s' into %s", self.info.id, path)
         return {"folder": str(path), "sensor": self.info.id, "host": socket.gethostname()}
+
+    def _inside_data_folder(self, folder: str) -> Path:
+        """``folder`` when it lies inside the site's data folder (``node.data_folder``);
+        else the refusal, counted (``recording.refused``)."""
+        path = Path(folder).expanduser()
+        base = Path(str(self.node.node_params.data_folder)).expanduser()
+        if not path.resolve().is_relative_to(base.resolve()):
+            self.refused += 1
+            raise RecordingCommandError(
+                f"sensor '{self.info.id}' records only inside the site's data folder {base} "
+                f"(node.data_folder), not into {path}; choose a folder there."
+            )
+        return path
 
     def _stop(self, args: dict[str, Any]) -> dict[str, Any]:
         thread = self.stop()
@@ -295,6 +310,7 @@ class NodeRecorder:
             "recording.seconds": self.seconds,
             "recording.dropped": self.dropped,
             "recording.error": self.error,
+            "recording.refused": self.refused,
         }
 
 

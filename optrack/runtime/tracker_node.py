@@ -3,7 +3,9 @@
 ``optrack node track --site NAME [--config FILE]``. It answers clock-sync
 requests (it is the site's time reference), keeps the site's calibration
 (stores what is published, answers nodes that ask for it), and feeds each
-:class:`~optrack.types.DetectionBatch` as it arrives to the tracker
+:class:`~optrack.types.DetectionBatch` as it arrives to the tracker (only a
+sensor of the current calibration's: others are counted in
+``foreign_sensor_batches`` and reported once)
 (anything with ``update(DetectionBatch, now) -> TrackBatch | None``; the
 tracker itself handles batches that arrive out of order). The tracks go
 through the output smoother (OpenPTrack's moving average; tracks unseen for
@@ -99,6 +101,7 @@ class TrackerNode(Node):
         self.batches = 0
         self.refused = 0
         self.future = 0  # refused: stamped ahead of this clock
+        self.foreign = 0  # refused: from a sensor the current calibration does not have
         self.published = 0
         self.repeats = 0
         self.tracks = 0
@@ -140,6 +143,16 @@ class TrackerNode(Node):
                 sensor,
                 f"detections published on {key} say they are from sensor "
                 f"'{message.batch.sensor_id}'; each sensor publishes on its own key.",
+            )
+            return
+        calibration = self.calibration
+        if calibration is not None and calibration.sensors and sensor not in calibration.sensors:
+            self.foreign += 1
+            known = ", ".join(sorted(calibration.sensors))
+            self._refuse(
+                sensor,
+                f"detections of sensor '{sensor}' are not used: the current calibration has "
+                f"no such sensor (it has: {known}); calibrate it to add it to the site.",
             )
             return
         self._detections.append(message)
@@ -257,6 +270,7 @@ class TrackerNode(Node):
             "repeats": self.repeats,
             "refused_batches": self.refused,
             "future_batches": self.future,
+            "foreign_sensor_batches": self.foreign,
             "sink_errors": self.sink_errors,
             "latency_p95_ms": self._latency.percentile(95) * 1000.0,
             "clock_requests": self.clock_server.requests,

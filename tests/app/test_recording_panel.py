@@ -52,7 +52,9 @@ def small_site(tmp_path):
             bus,
             replay,
             detection_params("kinect2"),
-            NODE_PARAMS.create({"preview_hz": 0.0, "status_period_s": 0.2}),
+            NODE_PARAMS.create(
+                {"preview_hz": 0.0, "status_period_s": 0.2, "data_folder": str(tmp_path)}
+            ),
             ClockSync(bus, CLOCK_PARAMS.create()),
             CalibrationStore(tmp_path / "state" / sensor),
             factory=lambda info, pose, detection: NobodyHere(),

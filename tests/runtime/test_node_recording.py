@@ -53,7 +53,9 @@ def site(venue, hub, make_client, tmp_path):
                 bus,
                 replay,
                 detection_params("kinect2"),
-                NODE_PARAMS.create({"preview_hz": 0.0, "status_period_s": 0.2}),
+                NODE_PARAMS.create(
+                    {"preview_hz": 0.0, "status_period_s": 0.2, "data_folder": str(tmp_path)}
+                ),
                 sync,
                 CalibrationStore(tmp_path / "state" / sensor),
                 factory=nobody,

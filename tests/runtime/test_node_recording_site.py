@@ -61,7 +61,11 @@ def test_a_node_killed_while_recording_leaves_every_frame_it_wrote_readable(
         yaml.safe_dump(
             {
                 "bus": {"mode": "client", "connect": endpoint, "multicast_scouting": False},
-                "node": {"state_dir": str(tmp_path / "state"), "status_period_s": 0.2},
+                "node": {
+                    "state_dir": str(tmp_path / "state"),
+                    "status_period_s": 0.2,
+                    "data_folder": str(tmp_path),
+                },
             }
         )
     )

@@ -1,0 +1,216 @@
+"""What each node of a running site accepts: recordings only inside the site's data folder,
+detections only from sensors of the current calibration, a peer bus only with keys (or
+--insecure, said in every status), the WebSocket output's origins and token as output
+parameters."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+
+import numpy as np
+import pytest
+import websockets.exceptions
+import yaml
+from websockets.sync.client import connect
+
+from optrack.cli import main
+from optrack.net.bus import Bus
+from optrack.net.clock import ClockServer
+from optrack.net.config import BUS_PARAMS
+from optrack.net.messages import DetectionsMessage, StatusMessage
+from optrack.outputs import OUTPUTS_PARAMS, Outputs
+from optrack.runtime.calibration_store import CalibrationStore
+from optrack.runtime.config import NODE_PARAMS
+from optrack.runtime.node import CommandError, send_command
+from optrack.runtime.tracker_node import TrackerNode
+from optrack.types import (
+    Detection,
+    DetectionBatch,
+    NetworkCalibration,
+    SensorCalibration,
+    as_matrix4,
+)
+from tests.runtime.conftest import free_port
+
+
+def wait_until(condition, timeout=60.0):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.05)
+
+
+def test_a_record_start_outside_the_sites_data_folder_is_refused_and_counted(
+    venue, hub, bus_params, make_client, processes, tmp_path
+):
+    ClockServer(hub)
+    data = tmp_path / "data"
+    config = tmp_path / "node.yaml"
+    endpoint = f"tcp/127.0.0.1:{int(bus_params.local_port)}"
+    config.write_text(
+        yaml.safe_dump(
+            {
+                "bus": {"mode": "client", "connect": endpoint, "multicast_scouting": False},
+                "node": {
+                    "state_dir": str(tmp_path / "state"),
+                    "status_period_s": 0.2,
+                    "data_folder": str(data),
+                },
+            }
+        )
+    )
+    statuses: list[StatusMessage] = []
+    client = make_client("operator")
+    client.subscribe(
+        client.keys.status("kinect2_0"), StatusMessage, lambda m, k: statuses.append(m)
+    )
+    sensor = f"file://{venue}?loop=restart#kinect2_0"
+    processes.start(
+        ["optrack.cli", "node", "detect", "--sensor", sensor, "--site", "test"]
+        + ["--config", str(config)],
+        "node",
+    )
+    wait_until(lambda: statuses, 120)
+    for folder in (tmp_path / "elsewhere", data / ".." / "escaped"):
+        with pytest.raises(CommandError, match="records only inside the site's data folder"):
+            send_command(client, "kinect2_0", "record_start", {"folder": str(folder)}, timeout=10)
+        assert not folder.exists()
+    wait_until(lambda: statuses[-1].values.get("recording.refused") == 2)
+    # Inside the data folder it records.
+    result = send_command(
+        client, "kinect2_0", "record_start", {"folder": str(data / "take")}, timeout=10
+    )
+    assert result["folder"] == str(data / "take")
+    send_command(client, "kinect2_0", "record_stop", timeout=10)
+    assert (data / "take").is_dir()
+
+
+def person(sensor: str, x: float) -> DetectionsMessage:
+    return DetectionsMessage(
+        batch=DetectionBatch(sensor, time.time(), detections=[Detection(x, 0.5, 0.9, 1.75, 2.0)])
+    )
+
+
+def test_detections_from_a_sensor_outside_the_calibration_are_refused_and_counted(
+    hub, make_client, tmp_path, caplog
+):
+    store = CalibrationStore(tmp_path / "tracker")
+    store.save(
+        NetworkCalibration(
+            sensors={"cam0": SensorCalibration(world_T_camera=as_matrix4(np.eye(4)))}
+        )
+    )
+    tracker = TrackerNode(hub, NODE_PARAMS.create({"status_period_s": 0.2}), store)
+    thread = threading.Thread(target=tracker.run, daemon=True)
+    thread.start()
+    camera = make_client("cams")
+    try:
+        with caplog.at_level(logging.WARNING, logger="optrack.runtime.tracker"):
+            for k in range(5):
+                camera.publish(camera.keys.detections("intruder"), person("intruder", 3.0))
+                camera.publish(camera.keys.detections("cam0"), person("cam0", 0.1 * k))
+            wait_until(lambda: tracker.foreign == 5 and tracker.batches == 5, 10)
+        values = tracker.status().values
+        assert values["foreign_sensor_batches"] == 5
+        assert values["batches"] == 5  # cam0's, all used
+        assert "hz.intruder" not in values
+        said = [r.getMessage() for r in caplog.records if "intruder" in r.getMessage()]
+        assert said == [
+            "detections of sensor 'intruder' are not used: the current calibration has no "
+            "such sensor (it has: cam0); calibrate it to add it to the site. (further "
+            "refusals from it are only counted)"
+        ]
+    finally:
+        tracker.stop()
+        thread.join(5)
+
+
+def peer_config(tmp_path, port: int):
+    config = tmp_path / "peer.yaml"
+    config.write_text(
+        yaml.safe_dump(
+            {
+                "bus": {
+                    "mode": "peer",
+                    "listen": f"tcp/127.0.0.1:{port}",
+                    "multicast_scouting": False,
+                    "gossip": False,
+                },
+                "node": {"state_dir": str(tmp_path / "state"), "status_period_s": 0.2},
+                "outputs": {"udp": ""},
+            }
+        )
+    )
+    return config
+
+
+def test_peer_mode_without_keys_refuses_to_start_and_insecure_says_so_in_every_status(
+    tmp_path, capsys, processes
+):
+    port = free_port()
+    config = peer_config(tmp_path, port)
+    code = main(["node", "track", "--site", "lab", "--config", str(config)])
+    assert code == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("optrack node track: bus.mode peer without site keys")
+    assert "--insecure" in err and len(err.splitlines()) == 1
+
+    node = processes.start(
+        ["optrack.cli", "node", "track", "--site", "lab", "--config", str(config), "--insecure"],
+        "tracker",
+    )
+    statuses: list[StatusMessage] = []
+    client = Bus(
+        "lab",
+        "observer",
+        BUS_PARAMS.create(
+            {
+                "mode": "peer",
+                "connect": f"tcp/127.0.0.1:{port}",
+                "multicast_scouting": False,
+                "gossip": False,
+                "insecure": True,
+            }
+        ),
+    )
+    try:
+        client.subscribe(client.keys.status(), StatusMessage, lambda m, k: statuses.append(m))
+        wait_until(lambda: statuses or node.poll() is not None, 60)
+        assert node.poll() is None, processes.output(node)
+        assert statuses[-1].node == "tracker"
+        assert statuses[-1].values["insecure"] is True
+    finally:
+        client.close()
+
+
+def test_the_websocket_outputs_origins_and_token_are_output_parameters():
+    outputs = Outputs(
+        OUTPUTS_PARAMS.create(
+            {
+                "udp": "",
+                "websocket": "127.0.0.1:0",
+                "websocket_origins": "http://venue.example",
+                "websocket_token": "s3cret",
+            }
+        )
+    )
+    try:
+        url = f"ws://127.0.0.1:{outputs.websocket_port}/"
+        with pytest.raises(websockets.exceptions.InvalidStatus):
+            with connect(url + "?token=s3cret", origin="http://localhost", open_timeout=5):
+                pass
+        with pytest.raises(websockets.exceptions.InvalidStatus):
+            with connect(url, origin="http://venue.example", open_timeout=5):
+                pass
+        with connect(url + "?token=s3cret", origin="http://venue.example", open_timeout=5):
+            pass
+        outputs.configure({"websocket_origins": "null,http://localhost", "websocket_token": ""})
+        url = f"ws://127.0.0.1:{outputs.websocket_port}/"
+        with connect(url, origin="http://localhost", open_timeout=5):
+            pass
+        (status,) = outputs.status()
+        assert status.kind == "websocket"
+    finally:
+        outputs.close()
