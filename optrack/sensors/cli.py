@@ -6,10 +6,11 @@ import argparse
 import contextlib
 import logging
 import queue
+import re
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 from optrack.cli import EXIT_ERROR, EXIT_OK, CommandError, add_json, emit_json, info
@@ -43,12 +44,93 @@ def _log_to_stderr() -> Iterator[None]:
 # ------------------------------------------------------------------ sensors
 
 
+#: A headless computer's cameras: one ``<name>.env`` each, for ``optrack-node@<name>``.
+SENSOR_ENV_DIR = "/etc/optrack/sensors"
+
+
+def _unit_name(name: str, taken: set[str]) -> str:
+    """``name`` as a systemd instance name (letters, digits, ``_.-``), unique in ``taken``."""
+    base = re.sub(r"[^a-z0-9_.-]+", "-", name.lower()).strip("-.") or "camera"
+    unique, n = base, 2
+    while unique in taken:
+        unique, n = f"{base}-{n}", n + 1
+    taken.add(unique)
+    return unique
+
+
+def _add_config(entries: list[dict[str, Any]], name_of: Callable[[dict], str]) -> None:
+    """Each entry with a URI gets ``config``: the file of ``/etc/optrack/sensors`` its
+    detector node service reads, and the line to put in it."""
+    taken: set[str] = set()
+    for entry in entries:
+        if entry.get("uri"):
+            name = _unit_name(name_of(entry), taken)
+            entry["config"] = {
+                "name": name,
+                "file": f"{SENSOR_ENV_DIR}/{name}.env",
+                "line": f"OPTRACK_SENSOR={entry['uri']}",
+            }
+
+
+def _usb_name(device: dict[str, Any]) -> str:
+    from optrack.sensors.uri import expected_sensor_id
+
+    known = expected_sensor_id(device["uri"])
+    return known or "-".join(str(p) for p in (device["model"], device["serial"]) if p)
+
+
+def _opened(uris: list[str]) -> list[dict[str, Any]]:
+    """The sensors ``--sensor`` names, each opened and read once: its id, model, URI."""
+    import optrack.sim.sensor  # noqa: F401 - registers sim://
+    from optrack.sensors.uri import open_sensor
+
+    found = []
+    for uri in uris:
+        with contextlib.closing(open_sensor(uri)) as sensor:
+            if sensor.read() is None:
+                raise CommandError(f"the sensor {uri} opened but gave no frame; check it.")
+            found.append({"uri": uri, "id": sensor.info.id, "model": sensor.info.model})
+    return found
+
+
+def _print_config(entries: list[dict[str, Any]]) -> None:
+    """The lines a headless computer's configuration needs for these sensors."""
+    configs = [entry for entry in entries if "config" in entry]
+    if not configs:
+        return
+    print(
+        f"\nFor the detector node services of this computer (optrack-node@<name>), "
+        f"one file each in {SENSOR_ENV_DIR}:"
+    )
+    for entry in configs:
+        config = entry["config"]
+        print(f"  {config['file']}: {config['line']}")
+    names = " ".join(f"optrack-node@{entry['config']['name']}" for entry in configs)
+    print(f"then: sudo systemctl enable --now {names}")
+    uris = ",".join(entry["uri"] for entry in configs)
+    print(
+        f"Or, for optrack run on this computer alone, in its site.yaml:\n  site:\n    sensors: {uris}"
+    )
+
+
 def cmd_sensors(args: argparse.Namespace) -> int:
-    """List the depth cameras on the USB bus (``devices``)."""
+    """List the depth cameras on the USB bus (``devices``), or open the sensors that
+    ``--sensor`` names (``sensors``); each with the line of its node's configuration."""
     from optrack.sensors import usb
 
     if getattr(args, "udev_rules", False):
         sys.stdout.write(usb.udev_rules())
+        return EXIT_OK
+    if args.sensor:
+        with _log_to_stderr():
+            opened = _opened(args.sensor)
+        _add_config(opened, lambda entry: entry["id"])
+        if args.json:
+            emit_json({"sensors": opened})
+            return EXIT_OK
+        for entry in opened:
+            print(f"{entry['uri']:40s} {entry['model']}  id {entry['id']}")
+        _print_config(opened)
         return EXIT_OK
     cameras = usb.list_cameras()
     devices = [camera.as_dict() for camera in cameras]
@@ -57,6 +139,7 @@ def cmd_sensors(args: argparse.Namespace) -> int:
     for camera in cameras:
         if camera.access == "denied":
             info(usb.permission_message(camera))
+    _add_config(devices, _usb_name)
     if args.json:
         emit_json({"devices": devices})
         return EXIT_OK
@@ -70,6 +153,7 @@ def cmd_sensors(args: argparse.Namespace) -> int:
             f"{uri:40s} {device['model']}  [{device['vendor_id']}:{device['product_id']}]"
             f"  bus {device['bus']} device {device['address']}{serial}"
         )
+    _print_config(devices)
     return EXIT_OK
 
 
@@ -265,6 +349,13 @@ def add_commands(commands: Any, command: Any) -> None:
         "--udev-rules",
         action="store_true",
         help="print the udev rules that let users open the cameras (Linux) and exit",
+    )
+    p.add_argument(
+        "--sensor",
+        action="append",
+        metavar="URI",
+        help="open this sensor (e.g. openni://Dummy) instead of listing the USB bus, and "
+        "print its configuration line (repeat for several)",
     )
     add_json(p)
     p = command("record", "Record live sensors into a recording.", "optrack.sensors.cli:cmd_record")
