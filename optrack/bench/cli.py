@@ -21,7 +21,9 @@ __all__ = [
     "cmd_bench_detection",
     "cmd_bench_e2e",
     "cmd_bench_sim",
+    "cmd_bench_site",
     "cmd_bench_skeleton",
+    "cmd_bench_soak",
     "cmd_bench_tracking",
 ]
 
@@ -122,6 +124,22 @@ def cmd_bench_skeleton(args: argparse.Namespace) -> int:
     return _report(args, result, [line])
 
 
+def cmd_bench_site(args: argparse.Namespace) -> int:
+    """A ``peer`` site across network namespaces: link cut, tracker kill, intruders."""
+    from optrack.bench.site import site_bench
+
+    result = site_bench()
+    return _report(args, result, (f"{key}: {value}" for key, value in result.items()))
+
+
+def cmd_bench_soak(args: argparse.Namespace) -> int:
+    """A 3-sensor site left running: memory growth, restarts, dropped frames."""
+    from optrack.bench.soak import soak_bench
+
+    result = soak_bench(float(args.minutes))
+    return _report(args, result, (f"{key}: {value}" for key, value in result.items()))
+
+
 #: ``optrack bench WHAT``: each benchmark's handler.
 BENCHES = {
     "sim": cmd_bench_sim,
@@ -130,6 +148,8 @@ BENCHES = {
     "calibration": cmd_bench_calibration,
     "e2e": cmd_bench_e2e,
     "skeleton": cmd_bench_skeleton,
+    "site": cmd_bench_site,
+    "soak": cmd_bench_soak,
 }
 
 
@@ -149,5 +169,8 @@ def add_commands(commands: Any, command: Any) -> None:
         "what",
         choices=tuple(BENCHES),
         help="what to measure",
+    )
+    p.add_argument(
+        "--minutes", type=float, default=10.0, help="soak: how long the site runs (e.g. 0.5)"
     )
     add_json(p)
