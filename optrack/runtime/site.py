@@ -168,9 +168,10 @@ class Site:
         detector's ``detection`` defaults are its sensor model's)."""
         endpoint = f"tcp/127.0.0.1:{int(self.config['bus'].local_port)}"
         common = {stage: dict(values) for stage, values in self.config.explicit.items()}
-        common.setdefault("bus", {}).update(
-            {"mode": "client", "connect": endpoint, "multicast_scouting": False, "gossip": False}
+        common.setdefault("bus", {}).update(  # the hub's bus.listen is not theirs
+            {"mode": "client", "connect": endpoint, "listen": "", "multicast_scouting": False}
         )
+        common["bus"]["gossip"] = False
         common["bus"].pop("identity", None)  # each node presents its own (bus.keys)
         common.setdefault("node", {})["state_dir"] = str(state_dir(self.config, self.name))
         common["outputs"] = self.config["outputs"].as_dict()
