@@ -22,6 +22,7 @@ from optrack.bench.site_process import (
     free_port,
 )
 from optrack.errors import UserError
+from optrack.net.messages import StatusMessage
 
 # A child that starts a grandchild, prints its pid, then both wait to be ended.
 PARENT = (
@@ -89,3 +90,28 @@ def test_the_receiver_keeps_every_datagram_with_its_arrival_time():
         2,
     ]
     assert all(abs(arrived - time.time()) < 10 for arrived, _ in receiver.arrivals)
+
+
+def test_the_launchers_site_status_names_its_nodes_and_counts_their_restarts(tmp_path):
+    values = {"bus": {"local_port": free_port()}, "site": {"name": "bench"}}
+    site = SiteProcess(values, tmp_path)
+    assert site.restarts() == 0 and site.site_values() == {}
+    # a stand-in launcher: a process with one child (a node), the site status naming it
+    site.process = subprocess.Popen([sys.executable, "-c", PARENT], stdout=subprocess.PIPE)
+    try:
+        node = int(site.process.stdout.readline())
+        status = StatusMessage(
+            node="site",
+            role="site",
+            state="running",
+            stamp=time.time(),
+            values={"pid.cam0": node, "restarts.cam0": 2, "pid.cam1": 0, "restarts.cam1": 1},
+        )
+        site._on_status(status, "optrack/bench/status/site")
+        assert site.restarts() == 3
+        assert site.pids() == {site.process.pid: "launcher", node: "cam0"}
+    finally:
+        for pid in descendants(site.process.pid):
+            os.kill(pid, 9)
+        site.process.wait()
+    assert site.stop() == site.process.returncode
