@@ -10,7 +10,8 @@ copies the folder to each computer of the site and names it in ``bus.keys``.
 Every Zenoh link of the site then uses mutual TLS with those keys (Zenoh's
 ``transport/link/tls``): a process whose certificate does not come from the
 site's authority cannot connect at all. Zenoh's ``access_control``, made from
-the certificates in the folder (:func:`access_control`), limits what each
+the folder's ``identities.json`` (the common names and roles of the
+certificates the authority signed; :func:`access_control`), limits what each
 common name may send: a detector node puts its own sensor's detections,
 previews, views and status; the tracker its tracks, status and the clock and
 calibration answers; only operator stations and the launcher (which acts for
@@ -24,14 +25,16 @@ private keys 0600): other users of the computer cannot join it.
 from __future__ import annotations
 
 import datetime
+import json
 import os
+import shutil
 import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 from optrack.errors import UserError
-from optrack.net.keys import ROOT, check_name
+from optrack.net.keys import NAME, ROOT, check_name
 
 __all__ = [
     "CA_FILE",
@@ -45,10 +48,12 @@ __all__ = [
     "local_keys",
     "role_of_node",
     "tls_settings",
+    "verified_roles",
 ]
 
 CA_FILE = "ca.pem"
 CA_KEY_FILE = "ca-key.pem"
+IDENTITIES_FILE = "identities.json"  # common name -> role, for the access control
 LOCAL_IDENTITY = "local"  # the one identity of a local site's processes (one user)
 #: What each role is: ``station`` (an operator station), ``launcher`` (``optrack run``,
 #: acting for the operator), ``tracker``, ``detector``, ``skeleton``, ``outputs``.
@@ -249,7 +254,55 @@ def init_site(
         if not (folder / f"{name}.pem").is_file():
             _issue(folder, ca, name, role)
             made.append(name)
+    roles = json.dumps(verified_roles(folder), indent=1, sort_keys=True) + "\n"
+    (folder / IDENTITIES_FILE).write_text(roles, encoding="utf-8")
     return made
+
+
+def _read_roles(folder: Path) -> dict[str, str]:
+    path = folder / IDENTITIES_FILE
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        raise KeysError(
+            f"{path} is missing or unreadable; copy the site's whole folder again (or run "
+            f"'optrack site init --out {folder}' where its authority's key is)."
+        ) from None
+    if not isinstance(data, dict):
+        raise KeysError(f"{path} is not a list of identities; copy the site's folder again.")
+    return {
+        str(name): str(role)
+        for name, role in data.items()
+        if role in ROLES and isinstance(name, str) and NAME.match(name)
+    }
+
+
+def verified_roles(folder: str | Path) -> dict[str, str]:
+    """Each certificate in ``folder`` that the site's authority signed, by common name,
+    with its role (the certificate's organisational unit); others are left out."""
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    folder = Path(folder).expanduser()
+    try:
+        ca_cert = x509.load_pem_x509_certificate((folder / CA_FILE).read_bytes())
+    except (OSError, ValueError):
+        raise KeysError(f"{folder / CA_FILE} is not a readable PEM certificate.") from None
+    roles: dict[str, str] = {}
+    for path in sorted(folder.glob("*.pem")):
+        if path.name == CA_FILE or path.name.endswith("-key.pem"):
+            continue
+        try:
+            cert = x509.load_pem_x509_certificate(path.read_bytes())
+            cert.verify_directly_issued_by(ca_cert)
+        except Exception:  # unreadable or not signed by the site: left out, never trusted
+            continue
+        name = cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value
+        units = cert.subject.get_attributes_for_oid(NameOID.ORGANIZATIONAL_UNIT_NAME)
+        role = str(units[0].value) if units else ""
+        if name == path.stem and role in ROLES:
+            roles[str(name)] = role
+    return roles
 
 
 def local_keys(base: str | Path | None = None) -> Path:
@@ -260,7 +313,7 @@ def local_keys(base: str | Path | None = None) -> Path:
         data = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
         base = Path(data) / "optrack" / "keys"
     folder = Path(base) / LOCAL_IDENTITY
-    if (folder / f"{LOCAL_IDENTITY}.pem").is_file():
+    if (folder / IDENTITIES_FILE).is_file():
         return folder
     Path(base).mkdir(parents=True, exist_ok=True)
     temp = Path(tempfile.mkdtemp(dir=base, prefix=".local-"))
@@ -270,8 +323,9 @@ def local_keys(base: str | Path | None = None) -> Path:
         try:
             os.rename(temp, folder)
         except OSError:  # another process made them meanwhile: use those
-            if not (folder / f"{LOCAL_IDENTITY}.pem").is_file():
-                raise
+            if not (folder / IDENTITIES_FILE).is_file():  # a partial folder: made anew
+                shutil.rmtree(folder)
+                os.rename(temp, folder)
     finally:
         if temp.exists():
             for path in temp.iterdir():
@@ -284,12 +338,12 @@ def local_keys(base: str | Path | None = None) -> Path:
 
 
 class SiteIdentities:
-    """The identities of a keys folder: each certificate the site's authority signed,
-    by common name, with its role."""
+    """The identities of a keys folder (its ``identities.json``, written by
+    :func:`init_site`): common name -> role. Read without parsing a certificate (a node
+    starts fast); Zenoh checks each certificate against the authority when a link opens,
+    and :func:`verified_roles` checks them all."""
 
     def __init__(self, folder: str | Path) -> None:
-        from cryptography import x509
-
         self.folder = Path(folder).expanduser()
         self.ca = self.folder / CA_FILE
         if not self.ca.is_file():
@@ -297,26 +351,7 @@ class SiteIdentities:
                 f"bus.keys {self.folder} holds no site keys ({CA_FILE} is missing); make them "
                 "with 'optrack site init --out FOLDER' and copy the folder to this computer."
             )
-        try:
-            ca_cert = x509.load_pem_x509_certificate(self.ca.read_bytes())
-        except ValueError:
-            raise KeysError(
-                f"{self.ca} is not a PEM certificate; copy the site's folder again."
-            ) from None
-        self.roles: dict[str, str] = {}
-        for path in sorted(self.folder.glob("*.pem")):
-            if path.name == CA_FILE or path.name.endswith("-key.pem"):
-                continue
-            try:
-                cert = x509.load_pem_x509_certificate(path.read_bytes())
-                cert.verify_directly_issued_by(ca_cert)
-            except Exception:  # unreadable or not signed by the site: ignored, never trusted
-                continue
-            name = cert.subject.get_attributes_for_oid(x509.NameOID.COMMON_NAME)[0].value
-            units = cert.subject.get_attributes_for_oid(x509.NameOID.ORGANIZATIONAL_UNIT_NAME)
-            role = str(units[0].value) if units else ""
-            if name == path.stem and role in ROLES:
-                self.roles[str(name)] = role
+        self.roles = _read_roles(self.folder)
 
     def require(self, name: str) -> str:
         """``name`` when the folder holds its certificate and private key."""

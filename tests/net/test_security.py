@@ -24,7 +24,13 @@ from optrack.net.messages import (
     ParamsMessage,
     encode,
 )
-from optrack.net.security import KeysError, SiteIdentities, init_site, local_keys
+from optrack.net.security import (
+    KeysError,
+    SiteIdentities,
+    init_site,
+    local_keys,
+    verified_roles,
+)
 from optrack.runtime.node import CommandError, send_command
 from optrack.types import DetectionBatch, NetworkCalibration
 from tests.net.conftest import free_port
@@ -86,6 +92,19 @@ def test_site_init_makes_an_authority_and_certificates_it_signed(tmp_path, capsy
     assert (folder / "tracker.pem").read_bytes() == before
     assert (folder / "ca.pem").read_bytes() == ca.public_bytes(serialization.Encoding.PEM)
     assert SiteIdentities(folder).roles["kinect2_1"] == "detector"
+    assert verified_roles(folder) == SiteIdentities(folder).roles
+
+
+def test_a_certificate_of_another_authority_is_never_listed(site_keys, foreign_keys, tmp_path):
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for path in site_keys.iterdir():
+        (copy / path.name).write_bytes(path.read_bytes())
+    (copy / "spy.pem").write_bytes((foreign_keys / "op1.pem").read_bytes())
+    (copy / "spy-key.pem").write_bytes((foreign_keys / "op1-key.pem").read_bytes())
+    assert "spy" not in verified_roles(copy)
+    assert init_site(copy, ["kinect2_5"]) == ["kinect2_5"]  # the list is made anew
+    assert set(SiteIdentities(copy).roles) == {"tracker", "kinect2_0", "kinect2_5", "op1"}
 
 
 def test_an_identity_without_its_authority_key_or_a_missing_name_is_one_sentence(

@@ -108,14 +108,18 @@ def test_detections_from_a_sensor_outside_the_calibration_are_refused_and_counte
     camera = make_client("cams")
     try:
         with caplog.at_level(logging.WARNING, logger="optrack.runtime.tracker"):
-            for k in range(5):
+            deadline = time.monotonic() + 30
+            x = 0.0
+            while tracker.foreign < 5 or tracker.batches < 5:  # realtime puts may drop
+                assert time.monotonic() < deadline, "timed out"
                 camera.publish(camera.keys.detections("intruder"), person("intruder", 3.0))
-                camera.publish(camera.keys.detections("cam0"), person("cam0", 0.1 * k))
-            wait_until(lambda: tracker.foreign == 5 and tracker.batches == 5, 10)
+                camera.publish(camera.keys.detections("cam0"), person("cam0", x))
+                x += 0.02
+                time.sleep(0.03)
         values = tracker.status().values
-        assert values["foreign_sensor_batches"] == 5
-        assert values["batches"] == 5  # cam0's, all used
-        assert "hz.intruder" not in values
+        assert values["foreign_sensor_batches"] == tracker.foreign >= 5
+        assert values["batches"] == tracker.batches >= 5  # cam0's, used
+        assert "hz.intruder" not in values and "hz.cam0" in values
         said = [r.getMessage() for r in caplog.records if "intruder" in r.getMessage()]
         assert said == [
             "detections of sensor 'intruder' are not used: the current calibration has no "
@@ -177,10 +181,12 @@ def test_peer_mode_without_keys_refuses_to_start_and_insecure_says_so_in_every_s
     )
     try:
         client.subscribe(client.keys.status(), StatusMessage, lambda m, k: statuses.append(m))
-        wait_until(lambda: statuses or node.poll() is not None, 60)
+        wait_until(
+            lambda: {"tracker", "outputs"} <= {s.node for s in statuses} or node.poll() is not None,
+            60,
+        )
         assert node.poll() is None, processes.output(node)
-        assert statuses[-1].node == "tracker"
-        assert statuses[-1].values["insecure"] is True
+        assert all(s.values["insecure"] is True for s in statuses)
     finally:
         client.close()
 
