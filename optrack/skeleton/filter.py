@@ -60,6 +60,7 @@ PARTITION_FRAMES: dict[str, tuple[str, ...]] = {
 }
 _ROOT_JOINT = {"left_arm": 4, "right_arm": 7, "left_leg": 10, "right_leg": 13}
 _YAW = 3
+_MOVING = [0, 1, 2, _YAW]  # the root numbers the motion model predicts by their velocity
 
 
 def motion_spread(params: Params, dt: float) -> np.ndarray:
@@ -130,6 +131,8 @@ class SkeletonFilter:
         self.estimate = np.zeros(D)
         self.particles = np.zeros((int(self.params.particles), D))
         self._areas = part_areas(shape)
+        # The root's velocity (x, y, z per second, heading rad/s), smoothed over frames.
+        self.velocity = np.zeros(len(_MOVING))
 
     def reset(self, state: np.ndarray, spread: np.ndarray | float = 0.0) -> None:
         """Put every particle at ``state`` plus Gaussian noise of ``spread`` per number."""
@@ -148,11 +151,19 @@ class SkeletonFilter:
         if len(self.particles) != int(self.params.particles):
             self.reset(self.estimate)
         spread = motion_spread(self.params, dt)
+        dt = min(max(float(dt), 0.0), float(self.params.max_dt))
+        drift = np.zeros(D)
+        drift[_MOVING] = self.velocity * dt * float(self.params.momentum)
         self.particles = _clamp(
-            self.particles + self.rng.normal(size=self.particles.shape) * spread
+            self.particles + drift + self.rng.normal(size=self.particles.shape) * spread
         )
+        before = self.estimate.copy()
         for name in PARTITIONS:
             self.anneal(points, name, int(self.params.layers), spread, gate=True)
+        if dt > 0.0:  # the root's velocity, smoothed: half the last frame's, half before
+            moved = self.estimate[_MOVING] - before[_MOVING]
+            moved[-1] = np.angle(np.exp(1j * moved[-1]))
+            self.velocity = 0.5 * self.velocity + 0.5 * moved / dt
         return self.estimate.copy()
 
     def anneal(

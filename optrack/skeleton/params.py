@@ -185,6 +185,15 @@ SKELETON_PARAMS = register(
                 help="Random walk of the hip and knee angles.",
             ),
             Param(
+                "momentum",
+                0.0,
+                min=0.0,
+                max=1.0,
+                step=0.05,
+                help="Share of the root's last velocity (position and heading, smoothed over "
+                "frames) the particles move by before the random walk (0: a pure random walk).",
+            ),
+            Param(
                 "max_dt",
                 0.2,
                 min=0.01,
@@ -244,6 +253,15 @@ SKELETON_PARAMS = register(
                 step=1,
                 help="Frames, spread over shape_seconds, the body's estimate fits (each costs about "
                 "half a second, once per person).",
+            ),
+            Param(
+                "shape_steps",
+                1,
+                min=1,
+                max=1000,
+                step=1,
+                help="Steps of the body's estimate per update (each refits one kept frame's pose "
+                "to one candidate body, about a hundredth of the estimate), so that no frame stalls.",
             ),
             Param(
                 "lost_frames",

@@ -37,7 +37,7 @@ from optrack.skeleton.init import height_from_cloud, initialise
 from optrack.skeleton.joints import JOINTS
 from optrack.skeleton.model import PARTS, BodyShape, forward_kinematics
 from optrack.skeleton.params import SKELETON_PARAMS
-from optrack.skeleton.shape import estimate_shape
+from optrack.skeleton.shape import ShapeSearch
 
 __all__ = ["SkeletonEstimate", "SkeletonTracker", "State"]
 
@@ -80,6 +80,7 @@ class SkeletonTracker:
         # The body is estimated once when not given: the clouds and poses it is fitted to.
         self.shape_estimated = shape is not None
         self._samples: list[tuple[float, np.ndarray, np.ndarray]] = []
+        self._search: ShapeSearch | None = None
         self._seed = seed
         self.filter: SkeletonFilter | None = None
         self.state: State = "initialising"
@@ -108,13 +109,14 @@ class SkeletonTracker:
             self._sample_shape(points, float(stamp))
         elif self.state != "tracking":
             self.state = "initialising"
+        self._advance_shape()
         return self._estimate(float(stamp), explained, support)
 
     def _sample_shape(self, points: np.ndarray, stamp: float) -> None:
         """Keep a tracked frame for the body's estimate; estimate it once there are enough."""
         p = self.params
         seconds, frames = float(p.shape_seconds), int(p.shape_frames)
-        if self.shape_estimated or seconds <= 0.0:
+        if self.shape_estimated or self._search is not None or seconds <= 0.0:
             return
         spacing = seconds / max(frames - 1, 1)
         if self._samples and stamp - self._samples[-1][0] < spacing * 0.999:
@@ -124,10 +126,26 @@ class SkeletonTracker:
             return
         clouds = [cloud for _, cloud, _ in self._samples]
         poses = [pose for _, _, pose in self._samples]
-        self.shape, refit = estimate_shape(clouds, poses, self.shape, p, self._seed or 0)
-        self.shape_estimated, self._samples = True, []
-        self.filter = SkeletonFilter(self.shape, p, self._seed)
-        self.filter.reset(refit[-1])
+        self._search = ShapeSearch(clouds, poses, self.shape, p, self._seed or 0)
+        self._samples = []
+
+    def _advance_shape(self) -> None:
+        """One step of the body's estimate, if one runs; once it is done, track on with
+        the body found, from the current pose."""
+        if self._search is None:
+            return
+        for _ in range(int(self.params.shape_steps)):
+            if self._search.advance():
+                break
+        if not self._search.done:
+            return
+        self.shape, self.shape_estimated = self._search.shape, True
+        self._search = None
+        pose = self.filter.estimate.copy()
+        velocity = self.filter.velocity
+        self.filter = SkeletonFilter(self.shape, self.params, self._seed)
+        self.filter.reset(pose)
+        self.filter.velocity = velocity
 
     def _start(self, points: np.ndarray) -> None:
         if self.shape is None:
