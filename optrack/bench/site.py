@@ -48,6 +48,7 @@ from optrack.bench.common import info
 from optrack.bench.netns import Lab, netns_problem
 from optrack.bench.site_process import descendants
 from optrack.errors import UserError
+from optrack.net.security import init_site
 from optrack.sim.venue_cache import RECORDED_VENUE, venue_recording
 
 __all__ = ["SiteProtocol", "site_bench"]
@@ -169,12 +170,10 @@ class SiteLab:
         return done.stdout
 
     def make_keys(self) -> None:
-        """Step 0: ``optrack site init`` (the site), and a foreign site's."""
+        """Step 0: ``optrack site init``."""
         nodes = ",".join(["site", "tracker", *SENSORS])
         init = [PY, "-m", "optrack.cli", "site", "init", "--site", SITE]
         self.run([*init, "--out", str(self.keys), "--nodes", nodes, "--stations", "bench"], 120)
-        foreign = [*init, "--out", str(self.folder / "foreign-keys"), "--nodes", SENSORS[0]]
-        self.run(foreign, 120)
 
     def config(self, host: str) -> Path:
         """Step 1: the site file of one computer (the same but for its sensor and hub)."""
@@ -228,15 +227,14 @@ class SiteLab:
             raise UserError(f"the station's watcher ended: {tail}")
 
     def tracker_pid(self) -> int:
-        """The tracker node's process on ``trk`` (a child of that launcher)."""
-        for pid in descendants(self.launchers["trk"].pid):
-            try:
-                argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
-            except OSError:
-                continue
-            if b"track" in argv and b"node" in argv:
-                return pid
-        raise UserError("no tracker node runs on the tracker computer.")
+        """The tracker node's process on ``trk``, as its launcher's ``site`` status names it
+        (a node restarted from the launcher's standby process keeps that one's command)."""
+        assert self.watcher is not None
+        named = [e for e in self.watcher.select("status") if "pid.tracker" in e["values"]]
+        pid = int(named[-1]["values"]["pid.tracker"]) if named else 0
+        if pid <= 0 or pid not in descendants(self.launchers["trk"].pid):
+            raise UserError("no tracker node runs on the tracker computer.")
+        return pid
 
     def stop(self) -> None:
         """Every launcher as Ctrl-C stops it (then killed, with its nodes), the watcher."""
@@ -344,35 +342,29 @@ def _tracker_kill(site: SiteLab, protocol: SiteProtocol) -> dict[str, Any]:
     }
 
 
-def _foreign_nodes(site: SiteLab) -> dict[str, Any]:
-    """Step 6: from ``d2``, at once, a detector node with another site's keys and one
-    without keys; each must fail to join (one sentence, exit 1)."""
-    uri = f"file://{site.recording}?loop=bounce#{SENSORS[0]}"
+def _foreign_nodes(site: SiteLab) -> dict[str, subprocess.Popen[str]]:
+    """Step 6 (started): from ``d2``, a node with another site's keys and one without keys
+    try to join the site as a detector node would (:func:`site_probe.join`)."""
+    init_site(site.folder / "foreign-keys", [SENSORS[0]], site="elsewhere")
     started = {}
-    for label, extra in (
-        ("foreign_keys", {"keys": str(site.folder / "foreign-keys")}),
-        ("no_keys", {"insecure": True}),
-    ):
-        bus = {"mode": "client", "connect": site.hub, "multicast_scouting": False}
-        bus.update({"connect_timeout_s": 4.0, **extra})
-        values = {"bus": bus, "node": {"state_dir": str(site.folder / f"state-{label}")}}
-        path = site.folder / f"{label}.yaml"
-        path.write_text(yaml.safe_dump(values), encoding="utf-8")
-        argv = [PY, "-m", "optrack.cli", "node", "detect", "--sensor", uri, "--site", SITE]
-        argv = site.lab.command("d2", [*argv, "--config", str(path)])
+    for label, keys in (("foreign_keys", str(site.folder / "foreign-keys")), ("no_keys", "")):
+        argv = [PY, "-m", "optrack.bench.site_probe", "join", "--site", SITE, "--keys", keys]
+        argv += ["--identity", SENSORS[0], "--connect", site.hub]
         started[label] = subprocess.Popen(
-            argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+            site.lab.command("d2", argv), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
         )
+    return started
+
+
+def _refused(started: dict[str, subprocess.Popen[str]]) -> dict[str, Any]:
+    """Step 6 (the answers): each must have been refused."""
     refused = {}
     for label, process in started.items():
-        try:
-            _, err = process.communicate(timeout=60)
-        except subprocess.TimeoutExpired:  # it joined and ran
-            process.kill()
-            _, err = process.communicate()
-        refused[label] = process.returncode not in (0, -9) and "join the bus" in err
+        out, err = process.communicate(timeout=120)
+        lines = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+        refused[label] = bool(lines) and not lines[-1]["joined"]
         if not refused[label]:
-            info(f"{label}: exit {process.returncode}: {err.strip()[-300:]}")
+            info(f"{label} was not refused: {(out + err).strip()[-300:]}")
     return {"foreign_node_refused": all(refused.values()), "foreign_nodes": refused}
 
 
@@ -438,25 +430,36 @@ def site_bench(
     path = Path(recording or venue_recording("mixed", 0, protocol.recording_s))
     with tempfile.TemporaryDirectory(prefix="optrack-bench-site-") as temp:
         site = SiteLab(Path(temp), path.resolve())
+        began = time.monotonic()
         site.make_keys()
         with site.lab:
             try:
                 site.start()
-                result: dict[str, Any] = {"start_s": round(_started(site, protocol), 1)}
-                info(f"site up on {len(HOSTS)} computers in {result['start_s']} s")
-                result.update(_link_cut(site, protocol))
-                info(f"link cut: rejoined in {result['link_rejoin_s']} s")
-                wait_for(lambda: _fresh_tracks(site), 30.0, "tracks before the kill", site.alive)
-                result.update(_tracker_kill(site, protocol))
-                info(f"tracker killed: tracks again in {result['tracker_recovery_s']} s")
-                result.update(_foreign_nodes(site))
-                result.update(_injections(site))
-                result.update(_datagrams(site))
-                result["restarts"] = _restarts(site)
-                result["computers"] = {h: site.address(h) for h in HOSTS}
-                result["load_average"] = [round(x, 2) for x in os.getloadavg()]
+                result = _steps(site, protocol)
             finally:
                 site.stop()
+        result["bench_s"] = round(time.monotonic() - began, 1)
+    return result
+
+
+def _steps(site: SiteLab, protocol: SiteProtocol) -> dict[str, Any]:
+    """Steps 3 to 7 on the running site; the figures."""
+    result: dict[str, Any] = {"start_s": round(_started(site, protocol), 1)}
+    info(f"site up on {len(HOSTS)} computers in {result['start_s']} s")
+    result.update(_link_cut(site, protocol))
+    info(f"link cut: rejoined in {result['link_rejoin_s']} s")
+    wait_for(lambda: _fresh_tracks(site), 30.0, "tracks before the kill", site.alive)
+    result.update(_tracker_kill(site, protocol))
+    info(f"tracker killed: tracks again in {result['tracker_recovery_s']} s")
+    intruders = time.monotonic()
+    joining = _foreign_nodes(site)
+    result.update(_injections(site))
+    result.update(_refused(joining))
+    result["intruders_s"] = round(time.monotonic() - intruders, 1)
+    result.update(_datagrams(site))
+    result["restarts"] = _restarts(site)
+    result["computers"] = {h: site.address(h) for h in HOSTS}
+    result["load_average"] = [round(x, 2) for x in os.getloadavg()]
     return result
 
 

@@ -8,6 +8,9 @@ each message it sees that an injection sent (``{"kind": "seen", ...}``: a
 parameter update, a calibration, detections on another sensor's key or of a
 sensor of no calibration). It stops when its stdin closes.
 
+``python -m optrack.bench.site_probe join ...``: a node that tries to join the site
+with keys of another site, or without keys; it prints whether it could.
+
 ``python -m optrack.bench.site_probe inject ...``: a compromised detector computer.
 With that detector's own certificate it tries what only an operator may do, then
 prints one JSON line naming each try (``{"kind": "injected", ...}``): a
@@ -27,6 +30,7 @@ import threading
 import time
 from typing import Any
 
+from optrack.errors import UserError
 from optrack.net.bus import Bus
 from optrack.net.config import BUS_PARAMS
 from optrack.net.keys import SiteKeys
@@ -172,11 +176,25 @@ def inject(args: argparse.Namespace) -> int:
     return 0
 
 
+def join(args: argparse.Namespace) -> int:
+    """Join as a client of ``--connect`` with ``--keys`` (``--keys ''``: without keys,
+    insecure), as a node of the site would; one line: joined or the sentence why not."""
+    params = {"mode": "client", "connect": args.connect, "multicast_scouting": False}
+    params.update({"connect_timeout_s": 4.0, "identity": args.identity})
+    params.update({"keys": args.keys} if args.keys else {"insecure": True})
+    try:
+        with Bus(args.site, args.identity, BUS_PARAMS.create(params)):
+            emit("join", joined=True, error="")
+    except UserError as error:
+        emit("join", joined=False, error=str(error))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m optrack.bench.site_probe")
-    parser.add_argument("what", choices=("watch", "inject"))
+    parser.add_argument("what", choices=("watch", "inject", "join"))
     parser.add_argument("--site", required=True)
-    parser.add_argument("--keys", required=True, help="the site's keys folder")
+    parser.add_argument("--keys", default="", help="the site's keys folder")
     parser.add_argument("--identity", required=True, help="the certificate to present")
     parser.add_argument("--connect", required=True, help="Zenoh endpoint(s)")
     parser.add_argument("--udp-port", type=int, default=0, help="watch: the outputs' port")
@@ -184,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--folder", default="", help="inject: where record_start would write")
     parser.add_argument("--udp-target", default="", help="inject: the UDP destination to add")
     args = parser.parse_args(argv)
-    return watch(args) if args.what == "watch" else inject(args)
+    return {"watch": watch, "inject": inject, "join": join}[args.what](args)
 
 
 if __name__ == "__main__":
