@@ -3,7 +3,7 @@
 ``python -m optrack.bench.site_probe watch ...``: an operator station. It joins the
 site's bus with its own certificate and prints one JSON line on stdout for each
 status of a node (``{"kind": "status", ...}``), each datagram of the site's UDP
-output that it receives (``{"kind": "udp", "ok": parseable, "ids": [...]}``) and
+output that it receives (``{"kind": "udp", "ok": parseable, "ids": [...], "tracks": [[id, x, y]...]}``) and
 each message it sees that an injection sent (``{"kind": "seen", ...}``: a
 parameter update, a calibration, detections on another sensor's key or of a
 sensor of no calibration). It stops when its stdin closes.
@@ -99,10 +99,12 @@ def _receive_udp(port: int, stop: threading.Event) -> None:
         try:
             document = json.loads(data.decode("utf-8"))
             tracks = document.get("tracks")
-            ids = [int(t["id"]) for t in tracks] if isinstance(tracks, list) else None
-            emit("udp", ok=True, ids=ids)
+            found = tracks if isinstance(tracks, list) else []
+            people = [[int(t["id"]), float(t["x"]), float(t["y"])] for t in found]
+            ids = [p[0] for p in people] if isinstance(tracks, list) else None
+            emit("udp", ok=True, ids=ids, tracks=people)
         except (ValueError, TypeError, KeyError, AttributeError):
-            emit("udp", ok=False, ids=None)
+            emit("udp", ok=False, ids=None, tracks=[])
     sock.close()
 
 
