@@ -20,6 +20,7 @@ __all__ = [
     "cmd_bench_calibration",
     "cmd_bench_detection",
     "cmd_bench_e2e",
+    "cmd_bench_install",
     "cmd_bench_sim",
     "cmd_bench_site",
     "cmd_bench_skeleton",
@@ -124,6 +125,18 @@ def cmd_bench_skeleton(args: argparse.Namespace) -> int:
     return _report(args, result, [line])
 
 
+def cmd_bench_install(args: argparse.Namespace) -> int:
+    """The Debian package's size and first start, installed on this computer (root)."""
+    from optrack.bench.install import install_bench
+
+    result = install_bench()
+    line = (
+        f"deb {result['deb_mb']} MB, installed {result['installed_mb']} MB "
+        f"(.venv {result['venv_mb']} MB), first tracks {result['first_tracks_s']} s"
+    )
+    return _report(args, result, [line])
+
+
 def cmd_bench_site(args: argparse.Namespace) -> int:
     """A ``peer`` site across network namespaces: link cut, tracker kill, intruders."""
     from optrack.bench.site import site_bench
@@ -148,6 +161,7 @@ BENCHES = {
     "calibration": cmd_bench_calibration,
     "e2e": cmd_bench_e2e,
     "skeleton": cmd_bench_skeleton,
+    "install": cmd_bench_install,
     "site": cmd_bench_site,
     "soak": cmd_bench_soak,
 }
