@@ -19,7 +19,7 @@ import threading
 import time
 from collections.abc import Iterable, Sequence
 
-from optrack.params import Param, Params
+from optrack.params import Param, Params, Schema
 from optrack.recording.format import SensorInfo
 from optrack.sensors.base import Sensor, SensorError
 from optrack.types import RGBDFrame
@@ -196,10 +196,25 @@ class LiveSensor(Sensor):
     #: sensor ids made from a serial start with this (``openni-1d27...``)
     id_prefix = "camera"
 
-    def __init__(self, target: str, params: Params, sensor_id: str | None = None, uri: str = ""):
+    #: the backend's parameter schema (its defaults when no ``params`` are given)
+    schema: Schema | None = None
+    #: the URI scheme the sensor is opened by (``openni://TARGET``)
+    scheme = "camera"
+
+    def __init__(
+        self,
+        target: str = "",
+        params: Params | None = None,
+        sensor_id: str | None = None,
+        uri: str = "",
+    ):
+        if params is None:
+            if self.schema is None:
+                raise TypeError(f"{type(self).__name__} names no parameter schema")
+            params = self.schema.create()
         self.target = target
         self.params = params
-        self.uri = uri
+        self.uri = uri or f"{self.scheme}://{target}"
         self.requested_id = sensor_id
         self.serial = ""
         self._id: str | None = None

@@ -131,6 +131,9 @@ class OpenNISensor(LiveSensor):
     backend = "OpenNI2"
     id_prefix = "openni"
 
+    schema = OPENNI_PARAMS
+    scheme = "openni"
+
     def __init__(
         self,
         target: str = "",
@@ -138,8 +141,7 @@ class OpenNISensor(LiveSensor):
         sensor_id: str | None = None,
         uri: str = "",
     ) -> None:
-        params = params if params is not None else OPENNI_PARAMS.create()
-        super().__init__(target, params, sensor_id, uri or f"openni://{target}")
+        super().__init__(target, params, sensor_id, uri)
         self.device: Any = None
         self.model = ""
         self.intrinsics_source = ""

@@ -109,6 +109,9 @@ class RealSenseSensor(LiveSensor):
     backend = "RealSense"
     id_prefix = "realsense"
 
+    schema = REALSENSE_PARAMS
+    scheme = "realsense"
+
     def __init__(
         self,
         target: str = "",
@@ -116,8 +119,7 @@ class RealSenseSensor(LiveSensor):
         sensor_id: str | None = None,
         uri: str = "",
     ) -> None:
-        params = params if params is not None else REALSENSE_PARAMS.create()
-        super().__init__(target, params, sensor_id, uri or f"realsense://{target}")
+        super().__init__(target, params, sensor_id, uri)
         import_pyrealsense2()  # fail at once, with the sentence, when it is missing
         self.model = ""
         self.modes: dict[str, Mode] = {}
