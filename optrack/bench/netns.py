@@ -54,7 +54,14 @@ def netns_problem() -> str | None:
     made = ip("netns", "add", probe, check=False)
     if made.returncode != 0:
         return f"'ip netns add' is refused here ({made.stderr.strip() or 'no reason given'})"
-    ip("netns", "del", probe, check=False)
+    try:
+        for kind in (["veth", "peer", "name", "b0"], ["bridge"]):
+            link = ip("-n", probe, "link", "add", "a0", "type", *kind, check=False)
+            if link.returncode != 0:
+                return f"a {kind[0]} link cannot be made here ({link.stderr.strip()})"
+            ip("-n", probe, "link", "del", "a0", check=False)
+    finally:
+        ip("netns", "del", probe, check=False)
     return None
 
 
