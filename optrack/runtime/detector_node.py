@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol
 
+import msgspec
 import numpy as np
 
 from optrack.errors import UserError
@@ -154,6 +155,7 @@ class DetectorNode(Node):
         # Recording and playback commands (optrack.runtime.node_recording).
         self.recorder = NodeRecorder(self, self.info)
         self.playback = NodePlayback(self, sensor) if isinstance(sensor, LiveReplay) else None
+        self._held: DetectionsMessage | None = None  # the last detections, sent while paused
 
     # ------------------------------------------------------------ calibration
     def _initial_pose(self) -> np.ndarray | None:
@@ -242,7 +244,8 @@ class DetectorNode(Node):
         self._take_calibration()
         self._take_scene()
         if self.playback is not None and self.playback.hold():
-            return True  # paused: no frame until a step or a resume
+            self._hold_scene()  # paused: no frame until a step or a resume
+            return True
         frame = self.sensor.read()
         if frame is None:
             return False
@@ -283,14 +286,12 @@ class DetectorNode(Node):
         batch.stamp = self.sync.to_tracker(captured)
         batch.seq = self.frames
         batch.processing_ms = processing * 1000.0
-        self.bus.publish(
-            self.bus.keys.detections(self.info.id),
-            DetectionsMessage(
-                batch=batch,
-                clock_offset_s=self.sync.offset_s,
-                clock_uncertainty_s=estimate.uncertainty_s if estimate is not None else None,
-            ),
+        self._held = DetectionsMessage(
+            batch=batch,
+            clock_offset_s=self.sync.offset_s,
+            clock_uncertainty_s=estimate.uncertainty_s if estimate is not None else None,
         )
+        self.bus.publish(self.bus.keys.detections(self.info.id), self._held)
         self.skeleton.offer(frame, batch, self.world_T_camera)
         self.frames += 1
         self.detections = len(batch.detections)
@@ -304,6 +305,18 @@ class DetectorNode(Node):
             self._next_preview = now + 1.0 / rate
             self._publish_preview(frame, batch)
         return True
+
+    def _hold_scene(self) -> None:
+        """A paused replay's scene stays as it was: its last detections are sent again,
+        stamped now (as a camera watching people standing still), so the tracker keeps
+        everyone with their IDs until a step or a resume moves them."""
+        if self._held is None:
+            return
+        batch = msgspec.structs.replace(
+            self._held.batch, stamp=self.sync.to_tracker(self.sync.clock())
+        )
+        self._held = msgspec.structs.replace(self._held, batch=batch)
+        self.bus.publish(self.bus.keys.detections(self.info.id), self._held)
 
     def _failed(self, error: BaseException) -> None:
         self.failures += 1
