@@ -9,16 +9,20 @@ station (:mod:`optrack.bench.site_probe` ``watch``: statuses from the bus, the
 site's UDP output). The site's keys come from ``optrack site init``; every link is
 mutual TLS. It follows docs/runtime.md, "Several computers", step by step:
 
-1. tracks flow at the station, every detector synchronised;
-2. ``d0``'s cable is pulled for ``cut_s`` (5 s): tracks keep flowing from the
+0. the keys (``optrack site init``), copied to each computer without the
+   authority's private key; 1. one configuration file per computer; 2. each
+   computer's ``optrack run`` and the station's watcher;
+3. tracks flow at the station and the tracker hears every sensor;
+4. ``d0``'s cable is pulled for ``cut_s`` (5 s): tracks keep flowing from the
    others and the tracker names ``kinect2_0`` silent; the cable is plugged back:
    ``link_rejoin_s`` is the time until the tracker hears that sensor again;
-3. the tracker process is killed (SIGKILL): its launcher restarts it, the
+5. the tracker process is killed (SIGKILL): its launcher restarts it, the
    detectors reconnect: ``tracker_recovery_s`` is the time from the kill to the
    first datagram with tracks;
-4. a node with keys of another site, and one without keys, try to join:
+6. from ``d2``, a node with keys of another site and one without keys try to join
+   as a detector node does (a client of the tracker computer's hub):
    ``foreign_node_refused``;
-5. from ``d2``, with that detector's own certificate, the injections of
+7. from ``d2``, with that detector's own certificate, the injections of
    :mod:`optrack.bench.site_probe` (``injections_refused`` of ``injections_tried``:
    a try counts as refused when nothing of it reached the station, or answered,
    and the control message sent beside it did arrive);
