@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from optrack.bench.netns import PREFIX, Lab, netns_problem
+from optrack.bench.netns import PREFIX, Lab, clean_stale, netns_problem
 
 PROBLEM = netns_problem()
 pytestmark = pytest.mark.skipif(
@@ -48,6 +48,16 @@ def test_a_lab_is_removed_even_when_its_user_fails():
             assert _reach(lab, "a", "192.0.2.1") == "no route"  # nothing leaves the lab
             raise RuntimeError("a failure inside")
     assert _namespaces() == before
+
+
+def test_what_a_crashed_run_left_is_removed_by_the_next():
+    stale = f"{PREFIX}{2**22 + 4321}sw"  # above any pid Linux hands out: that run is gone
+    subprocess.run(["ip", "netns", "add", stale], check=True)
+    try:
+        assert stale in clean_stale()
+        assert stale not in _namespaces()
+    finally:
+        subprocess.run(["ip", "netns", "del", stale], capture_output=True)
 
 
 def test_peer_site_across_network_namespaces(venue):
