@@ -410,6 +410,8 @@ class MainWindow(QMainWindow):
             return self.wizard
         bus = self.source.bus if isinstance(self.source, BusSource) else None
         self.wizard = CalibrationWizard(bus, self)
+        self.wizard.guidance_changed.connect(self.top_view.set_guidance)
+        self.wizard.guidance_changed.connect(self.world.set_guidance)
         self.wizard.show()
         return self.wizard
 

@@ -10,10 +10,13 @@ from PySide6.QtWidgets import QGraphicsPolygonItem, QWidget
 
 from app.trails import TrailHistory, track_color
 from app.widgets.overlay import Overlay
+from optrack.calibration.overlap import BoardSuggestion
 from optrack.geometry import floor_footprint
 from optrack.types import NetworkCalibration, TrackBatch
 
 SENSOR_COLOR = (40, 110, 200)
+#: Where the calibration wizard suggests holding the board.
+GUIDANCE_COLOR = (30, 170, 60)
 
 
 class TopView(pg.PlotWidget):
@@ -36,6 +39,7 @@ class TopView(pg.PlotWidget):
         self._labels: dict[int, pg.TextItem] = {}
         self._trail_items: dict[int, pg.PlotDataItem] = {}
         self.footprints: dict[str, np.ndarray] = {}
+        self.guidance_items: list = []  # where to hold the board next (calibration)
 
     # --------------------------------------------------------------- coverage
     def set_calibration(
@@ -80,6 +84,35 @@ class TopView(pg.PlotWidget):
             everything = np.vstack(points)
             low, high = everything.min(axis=0) - 1.0, everything.max(axis=0) + 1.0
             self.setRange(xRange=(low[0], high[0]), yRange=(low[1], high[1]), padding=0)
+
+    # --------------------------------------------------------------- guidance
+    def set_guidance(self, guidance: BoardSuggestion | None) -> None:
+        """Where to hold the board next (the calibration wizard's advice): the floor
+        region in green, the board seen from above and the camera it is for; None (or no
+        place found) clears them."""
+        for item in self.guidance_items:
+            self.removeItem(item)
+        self.guidance_items = []
+        if guidance is None or not guidance.found:
+            return
+        region = pg.ScatterPlotItem(
+            guidance.region[:, 0],
+            guidance.region[:, 1],
+            size=7,
+            pen=None,
+            brush=pg.mkBrush(*GUIDANCE_COLOR, 90),
+        )
+        board = pg.PlotDataItem(
+            guidance.corners[:, 0], guidance.corners[:, 1], pen=pg.mkPen(*GUIDANCE_COLOR, width=4)
+        )
+        label = pg.TextItem(
+            f"board for {guidance.sensor}", color=GUIDANCE_COLOR, anchor=(0.5, -0.4)
+        )
+        label.setPos(float(guidance.center[0]), float(guidance.center[1]))
+        self.guidance_items = [region, board, label]
+        for item in self.guidance_items:
+            item.setZValue(5)
+            self.addItem(item)
 
     # ----------------------------------------------------------------- tracks
     def set_batch(self, batch: TrackBatch) -> None:

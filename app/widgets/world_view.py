@@ -11,11 +11,14 @@ from PySide6.QtWidgets import QSizePolicy
 
 from app.trails import TrailHistory, track_color
 from app.widgets.overlay import Overlay
+from optrack.calibration.overlap import BoardSuggestion
 from optrack.geometry import camera_frustum
 from optrack.skeleton.joints import PARENT
 from optrack.types import NetworkCalibration, SkeletonBatch, TrackBatch
 
 FRUSTUM_COLOR = (0.45, 0.75, 1.0, 1.0)
+#: Where the calibration wizard suggests holding the board (region and outline).
+GUIDANCE_COLOR = (0.3, 0.95, 0.35, 1.0)
 # Frustum vertices: 0 is the optical centre, 1-4 the image corners at depth.
 FRUSTUM_EDGES = np.array([0, 1, 0, 2, 0, 3, 0, 4, 1, 2, 2, 3, 3, 4, 4, 1])
 # Where a camera may stand in the view's normalised coordinates (-1..1) once framed: its
@@ -111,6 +114,7 @@ class WorldView(gl.GLViewWidget):
         self.skeletons: dict[int, tuple[gl.GLLinePlotItem, gl.GLScatterPlotItem]] = {}
         self.show_skeletons = True
         self._skeletons = SkeletonBatch(stamp=0.0)
+        self.guidance_items: list = []  # where to hold the board next (calibration)
 
     # ---------------------------------------------------------------- cameras
     def set_calibration(self, calibration: NetworkCalibration, frustum_depth: float) -> None:
@@ -140,6 +144,27 @@ class WorldView(gl.GLViewWidget):
             [sensor.pose[:3, 3] for sensor in calibration.sensors.values()]
         ).reshape(-1, 3)
         self.frame_cameras()
+
+    # --------------------------------------------------------------- guidance
+    def set_guidance(self, guidance: BoardSuggestion | None) -> None:
+        """Where to hold the board next (the calibration wizard's advice, in this view's
+        frame): the floor region in green and the board's outline at the suggested place;
+        None (or no place found) clears them."""
+        for item in self.guidance_items:
+            self.removeItem(item)
+        self.guidance_items = []
+        if guidance is None or not guidance.found:
+            return
+        region = np.asarray(guidance.region, dtype=np.float64)
+        if region.shape[1] == 2:
+            region = guidance.floor_points()
+        corners = np.vstack([guidance.corners, guidance.corners[:1]])
+        self.guidance_items = [
+            gl.GLScatterPlotItem(pos=region, color=GUIDANCE_COLOR[:3] + (0.35,), size=6),
+            gl.GLLinePlotItem(pos=corners, color=GUIDANCE_COLOR, width=3, mode="line_strip"),
+        ]
+        for item in self.guidance_items:
+            self.addItem(item)
 
     # ---------------------------------------------------------------- framing
     def _in_view(self, points: np.ndarray) -> bool:

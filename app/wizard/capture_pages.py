@@ -19,6 +19,7 @@ from app.wizard.widgets import (
     operator_text,
     views_text,
 )
+from optrack.calibration.overlap import BoardSuggestion
 from optrack.types import NetworkCalibration
 
 if TYPE_CHECKING:
@@ -91,6 +92,7 @@ class ExtrinsicsPage(WizardPage):
         self.capturing = False
         self._drawn: dict[str, tuple] = {}
         self.last_state: LiveState | None = None
+        self.guidance: BoardSuggestion | None = None  # drawn in the views (site's frame)
 
     def initializePage(self) -> None:  # noqa: N802 - Qt
         self.images.set_sensors(self.calibration_wizard.sensors)
@@ -104,10 +106,31 @@ class ExtrinsicsPage(WizardPage):
 
     def cleanupPage(self) -> None:  # noqa: N802 - Qt
         self.stop_capture()
+        self.show_guidance(None)
 
     def validatePage(self) -> bool:  # noqa: N802 - Qt
         self.stop_capture()
+        self.show_guidance(None)
         return True
+
+    def show_guidance(self, guidance: BoardSuggestion | None) -> None:
+        """Draw where the backend suggests holding the board (this page's 3D view, in the
+        calibration's frame; the main window's views, in the site's, via the wizard)."""
+        same = (guidance is None) == (self.guidance is None) and (
+            guidance is None
+            or (guidance.sensor, guidance.partners, guidance.center.round(3).tobytes())
+            == (
+                self.guidance.sensor,
+                self.guidance.partners,
+                self.guidance.center.round(3).tobytes(),
+            )
+        )
+        if same:
+            return
+        self.guidance = guidance
+        if self.world is not None:
+            self.world.set_guidance(guidance.in_frame() if guidance is not None else None)
+        self.calibration_wizard.guidance_changed.emit(guidance)
 
     def show_state(self, state: LiveState) -> None:
         super().show_state(state)
@@ -162,6 +185,9 @@ class ExtrinsicsPage(WizardPage):
                 self.world.set_calibration(network, wizard.view_params.frustum_depth)
                 if newcomers and network.sensors:
                     self._frame_cameras(network)  # a camera joined: keep them all in view
+        self.show_guidance(
+            state.guidance if state.guidance is not None and state.guidance.found else None
+        )
         everything = bool(wizard.sensors) and set(wizard.sensors) <= calibrated
         if everything != self.all_calibrated:
             self.all_calibrated = everything

@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from PySide6.QtCore import QPoint, QTimer
+from PySide6.QtCore import QPoint, QTimer, Signal
 from PySide6.QtGui import QImage, QPainter
 from PySide6.QtWidgets import QWidget, QWizard
 
@@ -127,6 +127,9 @@ class CalibrationWizard(QWizard):
     ``sensors``: calibrate only these (default: every detector node of the site);
     ``world_view``: draw the cameras in 3D on the extrinsics page (needs OpenGL).
     """
+
+    #: where to hold the board next, in the site's frame (BoardSuggestion), or None
+    guidance_changed = Signal(object)
 
     def __init__(
         self,

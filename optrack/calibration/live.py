@@ -23,6 +23,7 @@ import numpy as np
 
 from optrack.calibration.intrinsics import IntrinsicsResult
 from optrack.calibration.live_refine import RefinementReport
+from optrack.calibration.overlap import BoardSuggestion
 from optrack.errors import UserError
 from optrack.params import Param, Schema, register
 from optrack.types import Intrinsics, NetworkCalibration
@@ -181,3 +182,5 @@ class LiveState:
     refinement: RefinementReport | None = None
     calibration: NetworkCalibration | None = None
     intrinsics_results: dict[str, IntrinsicsResult] = dataclasses.field(default_factory=dict)
+    # extrinsics: where to hold the board for a camera not calibrated yet (None: no advice)
+    guidance: BoardSuggestion | None = None

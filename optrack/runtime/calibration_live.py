@@ -47,9 +47,11 @@ from optrack.net.messages import (
     BoardViewMessage,
     CalibrationMessage,
     DetectionsMessage,
+    PreviewMessage,
     StatusMessage,
 )
 from optrack.params import Params
+from optrack.runtime.calibration_guidance import BoardGuide
 from optrack.runtime.calibration_operator import BoardOperator, SiteOperator
 from optrack.runtime.node import send_command
 from optrack.types import Intrinsics, NetworkCalibration
@@ -120,6 +122,11 @@ class LiveCalibration:
         )
         self._subscriptions.append(
             bus.subscribe(bus.keys.detections(), DetectionsMessage, self._on_detections)
+        )
+        # Where to hold the board next, from the cameras' rough poses (their previews).
+        self.guide = BoardGuide(board)
+        self._subscriptions.append(
+            bus.subscribe(bus.keys.preview(), PreviewMessage, self.guide.on_preview)
         )
         self._worker = threading.Thread(target=self._loop, name="live-calibration", daemon=True)
         self._worker.start()
@@ -264,7 +271,8 @@ class LiveCalibration:
     # ------------------------------------------------------- state and solving
     def state(self) -> LiveState:
         """A cheap snapshot (polled at ~5 Hz by the GUI)."""
-        return self.session.state(self.operator.doing() if self.operator is not None else "")
+        state = self.session.state(self.operator.doing() if self.operator is not None else "")
+        return self.guide.advise(state)
 
     def calibrate_intrinsics(self, sensor: str, progress: Progress) -> IntrinsicsResult:
         """One sensor's lens from its views of the intrinsics phase (LiveSession)."""

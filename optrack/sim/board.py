@@ -25,6 +25,7 @@ import numpy as np
 import open3d as o3d
 
 from optrack.calibration.board import Checkerboard
+from optrack.calibration.overlap import PLACEMENT_PARAMS
 from optrack.params import Param, Params, Schema, register
 from optrack.sim.materials import Material
 from optrack.sim.scenario import BoardSpec
@@ -74,21 +75,7 @@ BOARD_PARAMS = register(
             Param(
                 "carry_distance", 0.4, 0.2, 1.0, 0.05, "m", "Board centre in front of the operator."
             ),
-            Param(
-                "hold_heights",
-                "1.0,1.3,1.6",
-                help="Board centre heights tried at each spot, m (comma separated).",
-            ),
-            Param("grid_step", 0.25, 0.05, 1.0, 0.05, "m", "Spacing of the candidate spots."),
-            Param(
-                "square_px_min",
-                7.0,
-                3.0,
-                50.0,
-                0.5,
-                "px",
-                "Smallest square size (pixels) a sensor must see.",
-            ),
+            *PLACEMENT_PARAMS,  # optrack.calibration.overlap
             Param(
                 "square_px_wanted",
                 16.0,
@@ -108,15 +95,6 @@ BOARD_PARAMS = register(
                 "Smallest square size seen on the floor.",
             ),
             Param(
-                "max_incidence_deg",
-                60.0,
-                10.0,
-                85.0,
-                1.0,
-                "deg",
-                "Largest angle between the board's normal and a sensor.",
-            ),
-            Param(
                 "floor_max_incidence_deg",
                 65.0,
                 10.0,
@@ -124,16 +102,6 @@ BOARD_PARAMS = register(
                 1.0,
                 "deg",
                 "Largest angle between a board on the floor and a sensor.",
-            ),
-            Param(
-                "max_hold_tilt_deg",
-                30.0,
-                0.0,
-                80.0,
-                1.0,
-                "deg",
-                "A held board's face looks at most this far above or below the horizontal "
-                "(held steeper, its top edge would lean into the operator).",
             ),
             Param(
                 "wall_clearance",
@@ -161,15 +129,6 @@ BOARD_PARAMS = register(
                 0.01,
                 "1/m",
                 "Score lost per metre away from the carrying height.",
-            ),
-            Param(
-                "image_margin",
-                0.06,
-                0.0,
-                0.3,
-                0.01,
-                "",
-                "The board keeps this fraction of the image size from its border.",
             ),
             Param(
                 "floor_spacing",

@@ -16,12 +16,18 @@ import math
 import numpy as np
 import open3d as o3d
 
+from optrack.calibration.overlap import (
+    BoardLimits,
+    SensorView,
+    facing_between,
+    facing_rotations,
+    square_pixels,
+)
 from optrack.geometry import invert, make_pose, transform_points
 from optrack.params import Params
 from optrack.sim.board import BOARD_PARAMS, PhysicalBoard
 from optrack.sim.scenario import BoardSpec
 from optrack.sim.venue import Venue
-from optrack.types import Intrinsics
 
 __all__ = [
     "INTRINSICS_CELLS",
@@ -49,33 +55,10 @@ class BoardStep:
     square_px: float = 0.0  # the smallest square side the sensors see, pixels (held boards)
 
 
-@dataclasses.dataclass
-class SensorView:
-    """What the planner needs of a sensor: pose, intrinsics and working range."""
-
-    world_T_camera: np.ndarray
-    intrinsics: Intrinsics
-    min_range: float
-    max_range: float
-
-
-def _facing_rotations(normals: np.ndarray) -> np.ndarray:
-    """Rotations (N, 3, 3) of boards whose printed face looks along ``normals`` (N, 3):
-    z = -normal, x horizontal (world x for a board lying flat), y = z x x."""
-    n = normals / np.linalg.norm(normals, axis=1, keepdims=True)
-    z = -n
-    x = np.cross([0.0, 0.0, 1.0], n)
-    flat = np.linalg.norm(x, axis=1) < 1e-6
-    x[flat] = [1.0, 0.0, 0.0]
-    x /= np.linalg.norm(x, axis=1, keepdims=True)
-    y = np.cross(z, x)
-    return np.stack([x, y, z], axis=2)
-
-
 def board_pose_facing(center: np.ndarray, normal: np.ndarray, board: PhysicalBoard) -> np.ndarray:
     """``world_T_board`` with the printed face looking along ``normal``, x horizontal,
     and the pattern's centre at ``center``."""
-    rotation = _facing_rotations(np.asarray(normal, dtype=np.float64).reshape(1, 3))[0]
+    rotation = facing_rotations(np.asarray(normal, dtype=np.float64).reshape(1, 3))[0]
     return make_pose(rotation, np.asarray(center) - rotation @ board.center)
 
 
@@ -87,34 +70,15 @@ def _square_pixels(
     params: Params,
     floor: bool,
 ) -> np.ndarray:
-    """For N candidate board poses (rotations (N, 3, 3), pattern centres (N, 3)): the
-    smallest square side, in pixels, with which the sensor sees the whole pattern in
-    its image and range and at a usable angle; 0 where it does not."""
-    camera_T_world = invert(view.world_T_camera)
-    local = board.outline - board.center  # (4, 3)
-    world = np.einsum("nij,kj->nki", rotations, local) + centers[:, None, :]
-    camera = world @ camera_T_world[:3, :3].T + camera_T_world[:3, 3]
-    z = camera[..., 2]
-    k = view.intrinsics
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = k.fx * camera[..., 0] / z + k.cx
-        v = k.fy * camera[..., 1] / z + k.cy
-    mu, mv = params.image_margin * k.width, params.image_margin * k.height
-    ok = np.all((z >= view.min_range) & (z <= view.max_range), axis=1)
-    ok &= (u.min(axis=1) >= mu) & (u.max(axis=1) <= k.width - 1 - mu)
-    ok &= (v.min(axis=1) >= mv) & (v.max(axis=1) <= k.height - 1 - mv)
-    to_camera = view.world_T_camera[:3, 3] - centers
-    cos_incidence = np.einsum("ni,ni->n", -rotations[:, :, 2], to_camera) / np.linalg.norm(
-        to_camera, axis=1
+    """:func:`optrack.calibration.overlap.square_pixels` with the planner's limits for a
+    held (or, ``floor``, a laid) board."""
+    limits = BoardLimits(
+        float(params.image_margin),
+        float(params.floor_max_incidence_deg if floor else params.max_incidence_deg),
+        float(params.floor_square_px_min if floor else params.square_px_min),
     )
-    limit = params.floor_max_incidence_deg if floor else params.max_incidence_deg
-    ok &= cos_incidence >= math.cos(math.radians(limit))
-    sides = np.hypot(np.diff(u, axis=1, append=u[:, :1]), np.diff(v, axis=1, append=v[:, :1]))
-    squares = np.array([board.pattern.cols + 1, board.pattern.rows + 1] * 2, dtype=np.float64)
-    per_square = np.min(sides / squares, axis=1)
-    wanted = params.floor_square_px_min if floor else params.square_px_min
-    ok &= per_square >= wanted
-    return np.where(ok, per_square, 0.0)
+    squares = (board.pattern.cols + 1, board.pattern.rows + 1)
+    return square_pixels(view, rotations, centers, board.outline - board.center, squares, limits)
 
 
 def _sight_points(board: PhysicalBoard) -> np.ndarray:
@@ -234,24 +198,12 @@ def _held_step(room: _Room, subset: tuple[int, ...], centers: np.ndarray) -> Boa
     carrying height; None when no spot satisfies them."""
     params, board = room.params, room.board
     chosen = [room.views[i] for i in subset]
-    normals = sum(
-        (v.world_T_camera[:3, 3] - centers)
-        / np.linalg.norm(v.world_T_camera[:3, 3] - centers, axis=1, keepdims=True)
-        for v in chosen
-    )
-    flat = np.linalg.norm(normals[:, :2], axis=1, keepdims=True)
-    horizontal = normals[:, :2] / np.maximum(flat, 1e-9)
-    tilt = np.clip(
-        np.arctan2(normals[:, 2:], flat),
-        -math.radians(params.max_hold_tilt_deg),
-        math.radians(params.max_hold_tilt_deg),
-    )
-    normals = np.concatenate([horizontal * np.cos(tilt), np.sin(tilt)], axis=1)
+    normals, horizontal, tilt = facing_between(chosen, centers, float(params.max_hold_tilt_deg))
     # The operator stands behind the board and behind its top edge, which leans back.
     lean = (board.center[1] - board.lo[1]) * np.abs(np.sin(tilt))
     spots = centers[:, :2] - (params.carry_distance + lean) * horizontal
     usable = room.venue.is_free(spots, room.body_radius + params.spot_clearance)
-    rotations = _facing_rotations(normals)
+    rotations = facing_rotations(normals)
     sizes = np.stack([_square_pixels(v, rotations, centers, board, params, False) for v in chosen])
     score = np.minimum(sizes, params.square_px_wanted).min(axis=0) / params.square_px_wanted
     score -= params.height_preference * np.abs(centers[:, 2] - params.carry_height)
@@ -280,7 +232,7 @@ def _floor_steps(room: _Room, grid: np.ndarray, count: int) -> list[BoardStep]:
         room.venue.is_free(grid, float(np.max(board.hi - board.lo)) / 2 + params.spot_clearance)
     ]
     centers = np.column_stack([floor, np.full(len(floor), float(params.thickness))])
-    rotations = _facing_rotations(np.tile([0.0, 0.0, 1.0], (len(floor), 1)))
+    rotations = facing_rotations(np.tile([0.0, 0.0, 1.0], (len(floor), 1)))
     seen = np.stack(
         [_square_pixels(v, rotations, centers, board, params, True) > 0 for v in room.views]
     )
@@ -369,7 +321,7 @@ def plan_intrinsics_steps(
     )
     lean = (board.center[1] - board.lo[1]) * np.abs(normals_a[:, 2])
     spots = centers_a[:, :2] - (params.carry_distance + lean[:, None]) * horizontal
-    rotations = _facing_rotations(normals_a)
+    rotations = facing_rotations(normals_a)
     size = _square_pixels(view, rotations, centers_a, board, params, False)
     ok = (size > 0) & venue.is_free(spots, body_radius + params.spot_clearance)
     camera = transform_points(invert(view.world_T_camera), centers_a)

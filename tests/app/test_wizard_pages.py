@@ -284,3 +284,38 @@ def test_a_refinement_that_changed_nothing_says_so_and_shows_no_after_plot(wizar
     assert text.startswith("Nothing changed: no correction from the walk was applied")
     assert "3.1 cm on average" in text and "after" not in text
     assert page.after.isHidden()
+
+
+def test_the_extrinsics_page_says_where_to_hold_the_board_and_the_top_view_shows_it(qtbot):
+    """The backend's guidance (optrack.runtime.calibration_guidance, real geometry): the
+    page says it in a sentence, the main window's Top view draws the region and the board
+    while the page is on screen, and clears them when the page is left."""
+    from app.main_window import MainWindow
+    from optrack.calibration.synthetic import look_at
+    from optrack.runtime.calibration_guidance import BoardGuide
+
+    window = MainWindow()
+    qtbot.addWidget(window)
+    wizard = CalibrationWizard(None, window, world_view=False)
+    qtbot.addWidget(wizard)
+    wizard.guidance_changed.connect(window.top_view.set_guidance)
+    wizard.sensors = ["cam0", "cam1"]
+    page = wizard.extrinsics_page
+    page.images.set_sensors(wizard.sensors)
+    guide = BoardGuide(wizard.board)
+    guide.set_pose("cam0", look_at(np.array([-2.5, -2.0, 2.3]), np.array([0.0, 0.5, 0.9])))
+    guide.set_pose("cam1", look_at(np.array([2.5, -2.0, 2.3]), np.array([0.0, 0.5, 0.9])))
+    advised = guide.advise(
+        state("extrinsics", [sensor("cam0", 12, True), sensor("cam1", 2, False)])
+    )
+    page.show_state(advised)
+    x, y, _ = advised.guidance.center
+    assert page.message.text().startswith(f"For cam1: stand at about ({x:.1f}, {y:.1f})")
+    assert "facing cam1 and cam0" in page.message.text()
+    region, board, label = window.top_view.guidance_items
+    assert len(region.data) == len(advised.guidance.region) > 0
+    assert np.allclose(board.getData()[0], advised.guidance.corners[:, 0])
+    assert label.textItem.toPlainText() == "board for cam1"
+    page.cleanupPage()  # Back: the views forget it
+    assert window.top_view.guidance_items == []
+    window.close()
