@@ -35,6 +35,17 @@ from optrack.types import (
 from tests.runtime.conftest import free_port
 
 
+def node_config(tmp_path, bus: dict, outputs: dict | None = None, **node) -> str:
+    """A node's configuration file: its bus, its state in ``tmp_path``, statuses 5 a second."""
+    path = tmp_path / "node.yaml"
+    values = {"bus": bus, "node": {"state_dir": str(tmp_path / "state"), "status_period_s": 0.2}}
+    values["node"].update(node)
+    if outputs:
+        values["outputs"] = outputs
+    path.write_text(yaml.safe_dump(values))
+    return str(path)
+
+
 def wait_until(condition, timeout=60.0):
     deadline = time.monotonic() + timeout
     while not condition():
@@ -47,19 +58,11 @@ def test_a_record_start_outside_the_sites_data_folder_is_refused_and_counted(
 ):
     ClockServer(hub)
     data = tmp_path / "data"
-    config = tmp_path / "node.yaml"
     endpoint = f"tcp/127.0.0.1:{int(bus_params.local_port)}"
-    config.write_text(
-        yaml.safe_dump(
-            {
-                "bus": {"mode": "client", "connect": endpoint, "multicast_scouting": False},
-                "node": {
-                    "state_dir": str(tmp_path / "state"),
-                    "status_period_s": 0.2,
-                    "data_folder": str(data),
-                },
-            }
-        )
+    config = node_config(
+        tmp_path,
+        {"mode": "client", "connect": endpoint, "multicast_scouting": False},
+        data_folder=str(data),
     )
     statuses: list[StatusMessage] = []
     client = make_client("operator")
@@ -69,7 +72,7 @@ def test_a_record_start_outside_the_sites_data_folder_is_refused_and_counted(
     sensor = f"file://{venue}?loop=restart#kinect2_0"
     processes.start(
         ["optrack.cli", "node", "detect", "--sensor", sensor, "--site", "test"]
-        + ["--config", str(config)],
+        + ["--config", config],
         "node",
     )
     wait_until(lambda: statuses, 120)
@@ -132,22 +135,8 @@ def test_detections_from_a_sensor_outside_the_calibration_are_refused_and_counte
 
 
 def peer_config(tmp_path, port: int):
-    config = tmp_path / "peer.yaml"
-    config.write_text(
-        yaml.safe_dump(
-            {
-                "bus": {
-                    "mode": "peer",
-                    "listen": f"tcp/127.0.0.1:{port}",
-                    "multicast_scouting": False,
-                    "gossip": False,
-                },
-                "node": {"state_dir": str(tmp_path / "state"), "status_period_s": 0.2},
-                "outputs": {"udp": ""},
-            }
-        )
-    )
-    return config
+    links = {"listen": f"tcp/127.0.0.1:{port}", "multicast_scouting": False, "gossip": False}
+    return node_config(tmp_path, {"mode": "peer", **links}, outputs={"udp": ""})
 
 
 def test_peer_mode_without_keys_refuses_to_start_and_insecure_says_so_in_every_status(
@@ -155,14 +144,14 @@ def test_peer_mode_without_keys_refuses_to_start_and_insecure_says_so_in_every_s
 ):
     port = free_port()
     config = peer_config(tmp_path, port)
-    code = main(["node", "track", "--site", "lab", "--config", str(config)])
+    code = main(["node", "track", "--site", "lab", "--config", config])
     assert code == 1
     err = capsys.readouterr().err.strip()
     assert err.startswith("optrack node track: bus.mode peer without site keys")
     assert "--insecure" in err and len(err.splitlines()) == 1
 
     node = processes.start(
-        ["optrack.cli", "node", "track", "--site", "lab", "--config", str(config), "--insecure"],
+        ["optrack.cli", "node", "track", "--site", "lab", "--config", config, "--insecure"],
         "tracker",
     )
     statuses: list[StatusMessage] = []
