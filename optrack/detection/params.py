@@ -358,6 +358,23 @@ DETECTION_PARAMS = register(
                 help="Image for HOG: colour; infrared after histogram equalisation (time-of-flight); "
                 "auto: colour when the frame has it, else infrared.",
             ),
+            Param(
+                "edge_window",
+                True,
+                help="A candidate cut by the image's left or right border is also judged on its "
+                "visible part, mirrored at the border (the window keeps the person's scale); "
+                "the better score counts. Its floor position comes from its head.",
+            ),
+            Param(
+                "edge_head_radius",
+                0.09,
+                min=0.03,
+                max=0.3,
+                step=0.01,
+                unit="m",
+                help="A head cut by the image's border is centred this far inside its visible "
+                "inner edge (the person's floor position at the image's edge).",
+            ),
             # ------------------------------------------------------------ background
             Param(
                 "background_subtraction",

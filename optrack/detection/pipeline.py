@@ -38,6 +38,8 @@ from optrack.detection.classifier import (
     window_footprint,
 )
 from optrack.detection.clustering import Candidate, TallColumns, person_candidates
+from optrack.detection.edge import border_window, corrected_head, lateral_cut
+from optrack.detection.flags import is_occluded, outside_fraction
 from optrack.detection.ground import (
     FIT_POINTS,
     GroundEstimator,
@@ -87,6 +89,17 @@ class _Crop(NamedTuple):
     ground: tuple[np.ndarray, ...]
     valid: np.ndarray
     mask: np.ndarray
+
+
+class _Window(NamedTuple):
+    """A candidate's classifier window: the person's centre (camera frame) and height, the
+    window's homography to the image, the image pixels it covers and the crop's stride."""
+
+    center: np.ndarray
+    height: float
+    to_image: np.ndarray
+    footprint: tuple[int, int, int, int]
+    stride: int
 
 
 @dataclasses.dataclass
@@ -334,56 +347,46 @@ class PeopleDetector:
         plane = self.ground.plane
         assert plane is not None
         height = candidate.height
+        head = self._head(candidate, c_T_g, cloud.intrinsics)
         # Head top, floor and centre on the person's axis, camera frame.
         up_c = c_T_g[:3, 2]
-        hx, hy = float(candidate.head[0]), float(candidate.head[1])
-        bottom_c = c_T_g[:3, 0] * hx + c_T_g[:3, 1] * hy + c_T_g[:3, 3]
+        bottom_c = c_T_g[:3, 0] * float(head[0]) + c_T_g[:3, 1] * float(head[1]) + c_T_g[:3, 3]
         top_c, center_c = bottom_c + up_c * height, bottom_c + up_c * (height / 2.0)
         pixels, _ = project(np.stack([top_c, bottom_c, center_c]), cloud.intrinsics)
         fill = float(p.hog_window_fill)
         to_depth = level_window(center_c, height, plane.normal, cloud.intrinsics.K, fill)
         person_px = abs(float(pixels[1][1] - pixels[0][1]))
-        stride = max(1, round(person_px / fill / CROP_ROWS))
-        footprint = window_footprint(to_depth, cloud.shape)
-
-        crop = None
-        if source == "depth":
-            crop = self._crop(candidate, cloud, g_T_c, footprint, stride)
-            silhouette = (crop.mask * np.uint8(255)).astype(np.uint8)
-            window = person_window(silhouette, to_depth, footprint[:2], stride)
-            score = self.hog.score(window)
-            accepted = score > float(p.min_depth_confidence)
-        else:
-            assert image is not None
-            to_image = (
-                to_depth
-                if image_intrinsics is cloud.intrinsics
-                else level_window(center_c, height, plane.normal, image_intrinsics.K, fill)
-            )
-            score = self.hog.score(person_window(image, to_image))
-            accepted = score > float(p.min_confidence)
+        window = _Window(
+            center_c, height, to_depth, window_footprint(to_depth, cloud.shape),
+            max(1, round(person_px / fill / CROP_ROWS)),
+        )  # fmt: skip
+        score, crop = self._score(head, window, cloud, g_T_c, image, image_intrinsics, source)
+        threshold = p.min_depth_confidence if source == "depth" else p.min_confidence
+        accepted = score > float(threshold)
 
         # Flags and histogram, of accepted candidates only (the others are not output).
-        out_of_view = self._outside_fraction(pixels, person_px, cloud.shape) > float(
+        out_of_view = outside_fraction(pixels, person_px, cloud.shape) > float(
             p.out_of_view_fraction
         )
         occluded = False
         histogram: list[float] = []
         if accepted:
-            crop = (
-                crop if crop is not None else self._crop(candidate, cloud, g_T_c, footprint, stride)
-            )
-            occluded = self._occluded(
+            if crop is None:
+                crop = self._crop(head, height, cloud, g_T_c, window.footprint, window.stride)
+            occluded = is_occluded(
+                p,
                 crop.ground,
                 crop.valid,
-                (hx, hy),
+                (float(head[0]), float(head[1])),
                 pixels,
-                footprint[:2],
-                stride,
+                window.footprint[:2],
+                window.stride,
                 cloud.intrinsics,
                 float(center_c[2]),
             )
-            histogram = self._histogram(crop, color, color_intrinsics, cloud, footprint, stride)
+            histogram = self._histogram(
+                crop, color, color_intrinsics, cloud, window.footprint, window.stride
+            )
         detection = Detection(
             height=float(height),
             confidence=score,
@@ -395,17 +398,91 @@ class PeopleDetector:
         )
         return Judgement(candidate, score, source, accepted, detection)
 
+    def _head(self, candidate: Candidate, c_T_g: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
+        """Where the candidate stands (ground frame x, y): its head centroid, moved out for
+        a head cut by the image's left or right border (:mod:`optrack.detection.edge`)."""
+        p = self.params
+        if not p.edge_window:
+            return candidate.head
+        center = c_T_g[:3, :3] @ candidate.center + c_T_g[:3, 3]
+        side = lateral_cut(center, candidate.height, intrinsics)
+        if side == 0:
+            return candidate.head
+        return corrected_head(
+            candidate.points,
+            candidate.height,
+            candidate.head,
+            side,
+            c_T_g,
+            intrinsics,
+            float(p.head_fraction),
+            float(p.edge_head_radius),
+            float(p.voxel_size),
+        )
+
+    def _score(
+        self,
+        head: np.ndarray,
+        window: _Window,
+        cloud: OrganisedCloud,
+        g_T_c: np.ndarray,
+        image: np.ndarray | None,
+        image_intrinsics: Intrinsics,
+        source: str,
+    ) -> tuple[float, _Crop | None]:
+        """The candidate's confidence (and its crop when the depth silhouette was used):
+        the HOG score of its full-body window; for a person cut by the image's left or
+        right border, the better of that and the score of the window on the border,
+        mirrored there (its visible part judged)."""
+        p = self.params
+        plane = self.ground.plane
+        assert plane is not None
+        fill = float(p.hog_window_fill)
+        center_c, height = window.center, window.height
+        if source == "depth":
+            crop = self._crop(head, height, cloud, g_T_c, window.footprint, window.stride)
+            windows = [self._silhouette(crop, window.to_image, window, False)]
+            side = lateral_cut(center_c, height, cloud.intrinsics) if p.edge_window else 0
+            if side:
+                to_border = border_window(
+                    center_c, height, plane.normal, cloud.intrinsics, fill, side
+                )
+                footprint = window_footprint(to_border, cloud.shape)
+                border_crop = self._crop(head, height, cloud, g_T_c, footprint, window.stride)
+                border = window._replace(to_image=to_border, footprint=footprint)
+                windows.append(self._silhouette(border_crop, to_border, border, True))
+            return max(self.hog.score(w) for w in windows), crop
+        assert image is not None
+        to_image = (
+            window.to_image
+            if image_intrinsics is cloud.intrinsics
+            else level_window(center_c, height, plane.normal, image_intrinsics.K, fill)
+        )
+        score = self.hog.score(person_window(image, to_image))
+        side = lateral_cut(center_c, height, image_intrinsics) if p.edge_window else 0
+        if side:
+            to_border = border_window(center_c, height, plane.normal, image_intrinsics, fill, side)
+            score = max(score, self.hog.score(person_window(image, to_border, mirror=True)))
+        return score, None
+
+    @staticmethod
+    def _silhouette(crop: _Crop, to_image: np.ndarray, window: _Window, mirror: bool) -> np.ndarray:
+        """The HOG window of a crop's own pixels (white on black)."""
+        silhouette = (crop.mask * np.uint8(255)).astype(np.uint8)
+        return person_window(silhouette, to_image, window.footprint[:2], window.stride, mirror)
+
     def _crop(
         self,
-        candidate: Candidate,
+        head: np.ndarray,
+        height: float,
         cloud: OrganisedCloud,
         g_T_c: np.ndarray,
         footprint: tuple[int, int, int, int],
         stride: int,
     ) -> _Crop:
         """A strided crop of the window (x, y, z in the camera and in the ground frame),
-        its valid pixels, and the candidate's own: near its axis, above the floor,
-        below its head."""
+        its valid pixels, and the candidate's own: near its axis (``head``, on the floor),
+        above the floor, below its head (``height``)."""
         p = self.params
         u0, v0, u1, v1 = footprint
         if u1 > u0 and v1 > v0:
@@ -414,14 +491,14 @@ class PeopleDetector:
         else:
             crop_c = crop_g = tuple(np.full((0, 0), np.nan) for _ in range(3))
         gx, gy, gz = crop_g
-        hx, hy = float(candidate.head[0]), float(candidate.head[1])
+        hx, hy = float(head[0]), float(head[1])
         valid = np.isfinite(gz)
         with np.errstate(invalid="ignore"):
             mask = (
                 valid
                 & (np.hypot(gx - hx, gy - hy) < float(p.person_radius))
                 & (gz > float(p.ground_inlier_distance))
-                & (gz < candidate.height + float(p.voxel_size))
+                & (gz < height + float(p.voxel_size))
             )
         return _Crop(crop_c, crop_g, valid, mask)
 
@@ -478,51 +555,3 @@ class PeopleDetector:
             "z": float(position[2]),
             "camera_xyz": (float(camera_xyz[0]), float(camera_xyz[1]), float(camera_xyz[2])),
         }
-
-    @staticmethod
-    def _outside_fraction(pixels: np.ndarray, person_px: float, shape: tuple[int, int]) -> float:
-        """Fraction of the head-to-floor box (width half its height) outside the image."""
-        rows, cols = shape
-        top, bottom = pixels[0][1], pixels[1][1]
-        half = person_px / 4.0
-        left, right = pixels[2][0] - half, pixels[2][0] + half
-        area = max((bottom - top) * (right - left), 1e-9)
-        inside_w = max(0.0, min(right, cols) - max(left, 0.0))
-        inside_h = max(0.0, min(bottom, rows) - max(top, 0.0))
-        return float(1.0 - inside_w * inside_h / area)
-
-    def _occluded(
-        self,
-        crop_g: tuple[np.ndarray, ...],
-        valid: np.ndarray,
-        head: tuple[float, float],
-        pixels: np.ndarray,
-        origin: tuple[int, int],
-        stride: int,
-        intrinsics: Intrinsics,
-        depth: float,
-    ) -> bool:
-        """Whether more than ``occlusion_fraction`` of the pixels in front of the body
-        (head to floor, ``person_radius`` either side of its axis) show something above
-        the floor and nearer to the sensor than the person by ``occlusion_margin``."""
-        p = self.params
-        gx, gy, gz = crop_g
-        if gz.size == 0:
-            return False
-        person_range = math.hypot(*head)  # the camera stands over the ground frame's origin
-        u0, v0 = origin
-        half = float(p.person_radius) * intrinsics.fx / max(depth, 1e-6)
-        c0 = max(0, int((pixels[2][0] - half - u0) / stride))
-        c1 = min(gz.shape[1], int(math.ceil((pixels[2][0] + half - u0) / stride)))
-        r0 = max(0, int((pixels[0][1] - v0) / stride))
-        r1 = min(gz.shape[0], int(math.ceil((pixels[1][1] - v0) / stride)))
-        if c1 <= c0 or r1 <= r0:
-            return False
-        body = (slice(r0, r1), slice(c0, c1))
-        with np.errstate(invalid="ignore"):
-            nearer = (
-                valid[body]
-                & (gz[body] > float(p.ground_inlier_distance))
-                & (np.hypot(gx[body], gy[body]) < person_range - float(p.occlusion_margin))
-            )
-        return float(np.count_nonzero(nearer)) / nearer.size > float(p.occlusion_fraction)
