@@ -53,6 +53,9 @@ from optrack.errors import UserError
 # sensors (the embedded venue replays its rendering), or live sensors.
 LIVE_TEXT = "Live sensors. Open a recording to play it through the site instead."
 REPLAYED_TEXT = "Playing the site's own replayed sensors (no recording opened here)."
+# The stages a restarted site keeps as the nodes run them (docs/skeleton.md, Recording and
+# playback): the skeleton switch and its parameters, so a recording plays back with skeletons.
+SKELETON_STAGES = ("skeleton_live", "skeleton", "skeleton_fusion")
 
 __all__ = ["SPEEDS", "RecordingOpener", "RecordingPanel", "default_take_folder", "format_bytes"]
 
@@ -472,25 +475,35 @@ class RecordingOpener(QObject):
 
     def _config_with_outputs(self, config: str | None) -> str | None:
         """``config`` with the destinations the Outputs dock shows turned on (those the
-        operator added live included), written next to the window's other state, so a
-        restarted site streams where this one did."""
+        operator added live included) and the skeleton stages as the site's nodes run them
+        (switched on live included), written next to the window's other state, so a
+        restarted site streams where this one did and fits skeletons as it did."""
         import yaml
 
         from optrack.outputs.streams import OUTPUT_KINDS
         from optrack.outputs.udp import join_destinations
 
-        shown = [d for d in self.window.outputs.destinations if d.get("enabled", True)]
-        if not shown:
+        window = self.window
+        shown = [d for d in window.outputs.destinations if d.get("enabled", True)]
+        skeleton = {
+            stage: window.parameters.values[stage].as_dict()
+            for stage in SKELETON_STAGES
+            if stage in window._stage_reporter and stage in window.parameters.values
+        }
+        if not shown and not skeleton:
             return config
         data = yaml.safe_load(Path(config).read_text(encoding="utf-8")) if config else {}
-        outputs = dict((data or {}).get("outputs") or {})
-        for kind in OUTPUT_KINDS:
-            outputs[kind] = join_destinations(d["address"] for d in shown if d["kind"] == kind)
+        data = {**(data or {}), **skeleton}
+        if shown:
+            outputs = dict(data.get("outputs") or {})
+            for kind in OUTPUT_KINDS:
+                outputs[kind] = join_destinations(d["address"] for d in shown if d["kind"] == kind)
+            data["outputs"] = outputs
         if self._written is None:
             self._written = Path(tempfile.mkdtemp(prefix="optrack-window-"))
         self._restarts += 1
         path = self._written / f"site-{self._restarts}.yaml"
-        path.write_text(yaml.safe_dump({**(data or {}), "outputs": outputs}), encoding="utf-8")
+        path.write_text(yaml.safe_dump(data), encoding="utf-8")
         return str(path)
 
     def close(self) -> None:
