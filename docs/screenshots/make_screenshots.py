@@ -13,7 +13,7 @@ by the application itself:
         .venv/bin/optrack gui --screenshot docs/screenshots/main-window.png --quit-after 30
 
 The calibration wizard's pages (docs/screenshots/wizard-*.png) are taken
-against an embedded simulated site started here, its simulated operator
+against the default embedded site (`make run`'s) started here, its simulated operator
 moving the board, laying it down and walking as each page asks (several
 minutes on 2 cores); ``--wizard-only`` makes only those, ``--no-wizard``
 all the others.
@@ -129,23 +129,16 @@ def wizard_screenshots(settle) -> int:  # noqa: ANN001 - settle(ms) processes Qt
         port = probe.getsockname()[1]
     folder = Path(tempfile.mkdtemp(prefix="optrack-wizard-"))
     config = folder / "site.yaml"
-    # The sensors of the 'calibration' scenario, rendered live for the simulated operator.
-    uris = ",".join(f"sim://calibration/{k}?sensors=2&id=cam{k}" for k in range(2))
+    # The default site, as `make run` starts it (the embedded venue: three simulated Kinect
+    # v2), on its own port and state folder (the user's calibrations are left alone).
     config.write_text(
-        yaml.safe_dump(
-            {
-                "bus": {"local_port": port},
-                "site": {"name": "wizard", "sensors": uris},
-                "node": {"state_dir": str(folder / "state"), "status_period_s": 0.5},
-                "outputs": {"udp": ""},
-            }
-        )
+        yaml.safe_dump({"bus": {"local_port": port}, "node": {"state_dir": str(folder / "state")}})
     )
     window = MainWindow()
     window.set_source(choose_source(build_parser().parse_args(["--config", str(config)]), window))
     window.show()
     wait(lambda: window.source.connected, 120, "joining the embedded site")
-    wait(lambda: len(window.source.nodes_running("detection")) == 2, 120, "the detector nodes")
+    wait(lambda: len(window.source.nodes_running("detection")) == 3, 120, "the detector nodes")
     wizard = window.open_wizard()
     wizard.resize(1280, 860)
     try:
@@ -178,6 +171,11 @@ def wizard_screenshots(settle) -> int:  # noqa: ANN001 - settle(ms) processes Qt
         wizard.next()
 
         extrinsics = wizard.extrinsics_page
+        # The guidance: where a camera not calibrated yet shares a view with a calibrated one.
+        wait(lambda: extrinsics.guidance is not None or extrinsics.isComplete(), 600, "guidance")
+        if extrinsics.guidance is not None:
+            shot(wizard, "wizard-3-guidance.png")
+            window.top_view.grab().save(str(HERE / "top-view-guidance.png"))
         try:
             wait(extrinsics.isComplete, 600, "calibrating every sensor")
         finally:

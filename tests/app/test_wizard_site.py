@@ -1,9 +1,11 @@
-"""The calibration wizard against the embedded simulated site (the done-when check): opened
-from the main window's Calibration menu, driven through its six pages, each doing its work,
-while the site's simulated operator shows the board to one sensor, moves it between the
-sensors, lays it on the floor and walks when the page asks; the saved calibration is
-compared with the simulation's truth. OpenGL (the 3D view of the extrinsics page): run
-under Xvfb."""
+"""The newcomer's run: the calibration wizard against an embedded simulated site, opened
+from the main window's Calibration menu and driven through its six pages to Finish with
+the real widgets, each doing its work, while the site's simulated operator shows the
+board to one sensor, moves it between the sensors, lays it on the floor and walks when
+the page asks; the saved calibration is compared with the simulation's truth. The default
+site is the one `make run` starts (`optrack gui`: no sensors configured, the embedded venue
+of three simulated Kinect v2); the others are 2 and 4 simulated sensors (6: see docs/gui.md).
+OpenGL (the 3D view of the extrinsics page): run under Xvfb."""
 
 import time
 
@@ -26,8 +28,15 @@ from .conftest import free_port
 pytestmark = pytest.mark.opengl
 
 
-SENSORS = 2
-# Views of cam0 the intrinsics page collects before calibrating (calibrating needs
+# site -> (scenario, sensors, sim:// options; None: no sensors configured, `make run`'s
+# embedded venue), the sensor whose lens the intrinsics page calibrates (None: Next keeps
+# the sensors' own intrinsics).
+SITES = {
+    "default": ("mixed", 3, None, None),
+    "two": ("calibration", 2, "", "cam0"),
+    "four": ("mixed", 4, "&seconds=900", None),
+}
+# Views of the sensor the intrinsics page collects before calibrating (calibrating needs
 # calibration_intrinsics.min_views = 4; more, at other places and turns, pin the lens down).
 INTRINSICS_VIEWS = 14
 # How long the simulated person walks on the refinement page (the wizard asks for 60 s;
@@ -37,43 +46,54 @@ WALK_SECONDS = 20
 # this (people detections are centimetre-noisy; the board's calibration is millimetre-exact).
 REFINE_SLACK_M = 0.01
 REFINE_SLACK_DEG = 0.2
+# Issue 18's target: every camera within 2 cm and 0.3 degree of the truth. On the
+# two-sensor site cam0's lens is the one page 2 calibrated from 14 views, not the
+# sensor's own: its error moves cam0 too (over eight runs the solve was 2.1-10.6 mm and
+# 0.05-0.33 degree from the truth), so there 3 cm and 0.5 degree.
+TOLERANCE = {"two": (0.03, 0.5)}
+TARGET = (0.02, 0.3)
 
 
-def truth_poses() -> dict[str, np.ndarray]:
+def truth_poses(site: str) -> dict[str, np.ndarray]:
     """The simulated sensors' true poses (the simulated operator's scenes use the same)."""
-    sensors = Simulation("calibration", seed=0, sensors=SENSORS).sensors
-    return {f"cam{k}": np.asarray(sensor.world_T_camera) for k, sensor in enumerate(sensors)}
+    scenario, count, options, _ = SITES[site]
+    sensors = Simulation(scenario, seed=0, people=0, sensors=count).sensors
+    if options is None:
+        return {s.id: np.asarray(s.world_T_camera) for s in sensors}
+    return {f"cam{k}": np.asarray(s.world_T_camera) for k, s in enumerate(sensors)}
 
 
-@pytest.fixture
-def calibration_site(tmp_path):
-    """A site of two simulated sensors of the 'calibration' scenario (rendered live:
-    their simulated operator carries the board between them), on its own loopback port."""
+def site_config(tmp_path, site: str) -> str:
+    """The site's configuration: its own loopback port and state folder (other sites on
+    this computer, and the user's calibrations, are left alone) and, except on the
+    default site, its sensors; everything else as `make run` has it."""
+    scenario, count, options, _ = SITES[site]
+    config = {
+        "bus": {"local_port": free_port()},
+        "node": {"state_dir": str(tmp_path / "state")},
+    }
+    if options is not None:
+        uris = [f"sim://{scenario}/{k}?sensors={count}{options}&id=cam{k}" for k in range(count)]
+        config["site"] = {"name": f"wizard{site}", "sensors": ",".join(uris)}
     path = tmp_path / "site.yaml"
-    uris = ",".join(f"sim://calibration/{k}?sensors={SENSORS}&id=cam{k}" for k in range(SENSORS))
-    path.write_text(
-        yaml.safe_dump(
-            {
-                "bus": {"local_port": free_port()},
-                "site": {"name": "wizardtest", "sensors": uris, "report_s": 0.0},
-                "node": {"state_dir": str(tmp_path / "state"), "status_period_s": 0.5},
-                "outputs": {"udp": ""},
-            }
-        )
-    )
-    return path
+    path.write_text(yaml.safe_dump(config))
+    return str(path)
 
 
 @pytest.fixture
-def window(qtbot, calibration_site):
+def window(qtbot, request, tmp_path):
+    """The main window and its embedded site, started as `optrack gui --config FILE` does."""
+    site = request.param
     window = MainWindow()
     qtbot.addWidget(window)
-    args = build_parser().parse_args(["--config", str(calibration_site)])
+    args = build_parser().parse_args(["--config", site_config(tmp_path, site)])
     window.set_source(choose_source(args, window))
     window.show()
-    qtbot.waitUntil(lambda: window.source.connected, timeout=60000)
+    qtbot.waitUntil(lambda: window.source.connected, timeout=90000)
     # The wizard finds the sensors from their detector nodes' statuses: wait for them.
-    qtbot.waitUntil(lambda: len(window.source.nodes_running("detection")) == SENSORS, timeout=60000)
+    count = SITES[site][1]
+    qtbot.waitUntil(lambda: len(window.source.nodes_running("detection")) == count, timeout=90000)
+    window.site_name = site
     yield window
     window.close()
 
@@ -100,33 +120,41 @@ def waited(qtbot, condition, seconds: float, what: str, wizard) -> float:
     return time.monotonic() - start
 
 
-def true_intrinsics(sensor: int):
+def true_intrinsics(site: str, sensor: int):
     """The intrinsics of the image a simulated sensor's node finds the board in."""
-    info = SimulatedSensor.from_uri(f"sim://calibration/{sensor}?sensors={SENSORS}").info
-    return pick_image(info)[1]
+    scenario, count, options, _ = SITES[site]
+    uri = f"sim://{scenario}/{sensor}?sensors={count}{options}"
+    return pick_image(SimulatedSensor.from_uri(uri).info)[1]
 
 
-def test_wizard_calibrates_the_simulated_site_within_3_cm_and_half_a_degree(
-    qtbot, window, tmp_path
-):
-    truth = truth_poses()
-    wizard = window.open_wizard()
-    assert wizard.bus is window.source.bus
-    started = time.monotonic()
+def click_next(wizard) -> None:
+    """The Next button, as the operator presses it (enabled only when the page is done)."""
+    button = wizard.button(wizard.WizardButton.NextButton)
+    assert button.isEnabled() and button.isVisible()
+    button.click()
 
-    # 1. Network and checkerboard: the site's sensors, the default board.
+
+def network_page(qtbot, wizard, truth) -> None:
+    """1. Network and checkerboard: the site's sensors, the default board."""
     network = wizard.network_page
     waited(qtbot, network.isComplete, 60, "finding the sensors", wizard)
     assert sorted(wizard.sensors) == sorted(truth)
     assert network.sensor_list.count() == len(truth)
-    wizard.next()
+    click_next(wizard)
     assert wizard.currentPage() is wizard.intrinsics_page
 
-    # 2. Intrinsics of cam0. Calibrating without views is refused with the backend's
-    # sentence, on the page; then the simulated operator shows the board to cam0 all over
-    # its image, turned many ways, and its lens is calibrated from those views.
+
+def intrinsics_page(qtbot, wizard, site: str, sensor: str | None):
+    """2. Intrinsics of ``sensor`` (None: Next, the sensors' own intrinsics kept).
+    Calibrating without views is refused with the backend's sentence, on the page; then
+    the simulated operator shows the board to the sensor all over its image, turned many
+    ways, and its lens is calibrated from those views."""
     intrinsics = wizard.intrinsics_page
-    intrinsics.sensor.setCurrentText("cam0")
+    if sensor is None:
+        waited(qtbot, intrinsics.isComplete, 30, "the intrinsics page", wizard)
+        click_next(wizard)
+        return None
+    intrinsics.sensor.setCurrentText(sensor)
     intrinsics.calibrate_button.click()
     waited(qtbot, lambda: intrinsics.error.isVisible(), 30, "the refusal", wizard)
     refusal = intrinsics.error.text()
@@ -135,19 +163,19 @@ def test_wizard_calibrates_the_simulated_site_within_3_cm_and_half_a_degree(
     intrinsics.start_button.click()
     took = waited(
         qtbot,
-        lambda: intrinsics.views_seen.get("cam0", 0) >= INTRINSICS_VIEWS,
+        lambda: intrinsics.views_seen.get(sensor, 0) >= INTRINSICS_VIEWS,
         90,
-        f"{INTRINSICS_VIEWS} intrinsics views of cam0",
+        f"{INTRINSICS_VIEWS} intrinsics views of {sensor}",
         wizard,
     )
     print(f"{INTRINSICS_VIEWS} intrinsics views {took:.0f} s after Start capture")
-    # The coverage overlay: corners seen in many cells of cam0's image, not in one spot.
+    # The coverage overlay: corners seen in many cells of the image, not in one spot.
     assert intrinsics.tile.coverage is not None and (intrinsics.tile.coverage > 0).sum() >= 6
     intrinsics.calibrate_button.click()
-    waited(qtbot, lambda: "cam0" in intrinsics.results, 60, "the intrinsics", wizard)
-    lens, true_lens = intrinsics.results["cam0"], true_intrinsics(0)
+    waited(qtbot, lambda: sensor in intrinsics.results, 60, "the intrinsics", wizard)
+    lens, true_lens = intrinsics.results[sensor], true_intrinsics(site, int(sensor[3:]))
     print(
-        f"cam0 intrinsics: fx {lens.intrinsics.fx:.1f} (true {true_lens.fx:.1f}), "
+        f"{sensor} intrinsics: fx {lens.intrinsics.fx:.1f} (true {true_lens.fx:.1f}), "
         f"cx {lens.intrinsics.cx:.1f} ({true_lens.cx:.1f}), cy {lens.intrinsics.cy:.1f} "
         f"({true_lens.cy:.1f}) px, RMS {lens.rms:.2f} px over {len(lens.used)} views"
     )
@@ -156,31 +184,36 @@ def test_wizard_calibrates_the_simulated_site_within_3_cm_and_half_a_degree(
     assert abs(lens.intrinsics.cx - true_lens.cx) < 0.02 * true_lens.width
     assert abs(lens.intrinsics.cy - true_lens.cy) < 0.02 * true_lens.height
     views = intrinsics.table.keys.index("intrinsics")
-    assert (
-        intrinsics.table.item(intrinsics.table.rows["cam0"], views).text().startswith("calibrated")
-    )
-    wizard.next()
+    cell = intrinsics.table.item(intrinsics.table.rows[sensor], views)
+    assert cell.text().startswith("calibrated")
+    click_next(wizard)
+    return lens
 
-    # 3. Extrinsics: the simulated operator moves the board until every sensor is calibrated
-    # (cam0 with the intrinsics just calibrated).
+
+def extrinsics_page(qtbot, wizard, truth, sensor: str | None, lens) -> None:
+    """3. Extrinsics: the simulated operator moves the board until every sensor is
+    calibrated (a lens calibrated on page 2 used for its sensor)."""
     extrinsics = wizard.extrinsics_page
     assert wizard.currentPage() is extrinsics
     took = waited(qtbot, extrinsics.isComplete, 420, "calibrating every sensor", wizard)
     print(f"every sensor calibrated {took:.0f} s after the extrinsics page opened")
     state = extrinsics.last_state
-    assert state.sensors["cam0"].intrinsics == lens.intrinsics
+    if sensor is not None:
+        assert state.sensors[sensor].intrinsics == lens.intrinsics
     fair, good = wizard.view_thresholds("extrinsics")
     views = extrinsics.table.keys.index("views")
-    for sensor, live in state.sensors.items():
-        cell = extrinsics.table.item(extrinsics.table.rows[sensor], views)
+    for name, live in state.sensors.items():
+        cell = extrinsics.table.item(extrinsics.table.rows[name], views)
         assert cell.text() == str(live.views)
         assert cell.background().color() == COUNT_COLORS[count_level(live.views, fair, good)]
     shared = {tuple(sorted((a, b))): n for a, b, n in state.covisibility if n > 0}
     assert extrinsics.graph.edges == shared and shared
     assert set(extrinsics.world.cameras) == set(truth)  # a frustum per calibrated sensor
-    wizard.next()
+    click_next(wizard)
 
-    # 4. Ground: the operator lays the board on the floor; then solve.
+
+def floor_page(qtbot, wizard, truth):
+    """4. Ground: the operator lays the board on the floor; then solve."""
     floor = wizard.floor_page
     assert wizard.currentPage() is floor
     floor.capture_button.click()
@@ -196,12 +229,15 @@ def test_wizard_calibrates_the_simulated_site_within_3_cm_and_half_a_degree(
     waited(qtbot, floor.isComplete, 120, "the solve", wizard)
     assert "the world's origin is on the floor" in floor.solved.text()
     solved = calibration_errors({s: e.pose for s, e in wizard.solved.sensors.items()}, truth)
-    wizard.next()
+    click_next(wizard)
+    return solved
 
-    # 5. Refinement: one simulated person walks; the sensors' trajectories of them are
-    # aligned when the walk ends. The sensors agree no worse after, and the calibration is
-    # no worse than the checkerboard's (against the truth): a correction the board's views
-    # contradict is refused (on this site Algorithm 1's usually are).
+
+def refinement_page(qtbot, wizard, truth, solved):
+    """5. Refinement: one simulated person walks; the sensors' trajectories of them are
+    aligned when the walk ends. The sensors agree no worse after, and the calibration is
+    no worse than the checkerboard's (against the truth): a correction the board's views
+    contradict is refused (on these sites Algorithm 1's usually are)."""
     refinement = wizard.refinement_page
     assert wizard.currentPage() is refinement
     refinement.duration.setValue(WALK_SECONDS)
@@ -238,9 +274,12 @@ def test_wizard_calibrates_the_simulated_site_within_3_cm_and_half_a_degree(
         assert refinement.after.isHidden()
     assert refined.max_position_error_m <= solved.max_position_error_m + REFINE_SLACK_M
     assert refined.max_rotation_error_deg <= solved.max_rotation_error_deg + REFINE_SLACK_DEG
-    wizard.next()
+    click_next(wizard)
+    return report
 
-    # 6. Review: save (twice: the first file is kept as a backup), export, send.
+
+def review_page(qtbot, wizard, truth, report, tmp_path):
+    """6. Review: save (twice: the first file is kept as a backup), export, send."""
     review = wizard.review_page
     assert wizard.currentPage() is review
     waited(qtbot, lambda: review.table.rowCount() == len(truth), 30, "the review", wizard)
@@ -262,7 +301,28 @@ def test_wizard_calibrates_the_simulated_site_within_3_cm_and_half_a_degree(
     assert set(poses) == set(truth)
     review.publish()
     waited(qtbot, lambda: review.published, 30, "sending", wizard)
-    print(f"six pages in {time.monotonic() - started:.0f} s")
+    return path
+
+
+@pytest.mark.parametrize("window", sorted(SITES), indirect=True)
+def test_the_wizard_calibrates_the_simulated_site_from_page_1_to_finish(qtbot, window, tmp_path):
+    site = window.site_name
+    truth = truth_poses(site)
+    sensor = SITES[site][3]
+    menu = next(a.menu() for a in window.menuBar().actions() if a.text() == "&Calibration")
+    menu.actions()[0].trigger()  # Calibration → Calibrate…
+    wizard = window.wizard
+    assert wizard.bus is window.source.bus
+    started = time.monotonic()
+    network_page(qtbot, wizard, truth)
+    lens = intrinsics_page(qtbot, wizard, site, sensor)
+    extrinsics_page(qtbot, wizard, truth, sensor, lens)
+    solved = floor_page(qtbot, wizard, truth)
+    report = refinement_page(qtbot, wizard, truth, solved)
+    path = review_page(qtbot, wizard, truth, report, tmp_path)
+    wizard.button(wizard.WizardButton.FinishButton).click()
+    assert not wizard.isVisible()
+    print(f"{site} site: page 1 to Finish in {time.monotonic() - started:.0f} s")
 
     saved = load_calibration(path)
     assert (tmp_path / "calibration.yaml.bak").is_file()
@@ -272,19 +332,22 @@ def test_wizard_calibrates_the_simulated_site_within_3_cm_and_half_a_degree(
         f"{errors.max_rotation_error_deg:.3f} deg at worst"
     )
     assert set(saved.sensors) == set(truth)
-    saved_lens = saved.sensors["cam0"].intrinsics
-    assert (saved_lens.fx, saved_lens.cy) == pytest.approx((lens.intrinsics.fx, lens.intrinsics.cy))
+    if sensor is not None:
+        saved_lens = saved.sensors[sensor].intrinsics
+        assert (saved_lens.fx, saved_lens.cy) == pytest.approx(
+            (lens.intrinsics.fx, lens.intrinsics.cy)
+        )
     # The refined calibration was saved: each sensor's walk correction, or none where the
     # checkerboard's pose was kept.
-    for sensor, entry in saved.sensors.items():
-        assert (entry.refinement is not None) == (sensor in report.corrections)
-        assert np.allclose(entry.pose, report.calibration.pose(sensor), atol=1e-6)
-    assert errors.max_position_error_m < 0.03
-    assert errors.max_rotation_error_deg < 0.5
+    for name, entry in saved.sensors.items():
+        assert (entry.refinement is not None) == (name in report.corrections)
+        assert np.allclose(entry.pose, report.calibration.pose(name), atol=1e-6)
+    position_m, rotation_deg = TOLERANCE.get(site, TARGET)
+    assert errors.max_position_error_m <= position_m, errors.as_dict()
+    assert errors.max_rotation_error_deg <= rotation_deg, errors.as_dict()
     # The floor is the world's z = 0: each camera's height as the truth has it.
-    for sensor, pose in truth.items():
-        assert abs(saved.sensors[sensor].pose[2, 3] - pose[2, 3]) < 0.03
-    wizard.accept()
+    for name, pose in truth.items():
+        assert abs(saved.sensors[name].pose[2, 3] - pose[2, 3]) < position_m
 
 
 def test_the_calibration_menu_opens_the_wizard_which_says_when_there_is_no_site(qtbot):
