@@ -102,8 +102,9 @@ class TopView(pg.PlotWidget):
             pen=None,
             brush=pg.mkBrush(*GUIDANCE_COLOR, 90),
         )
+        outline = np.vstack([guidance.corners, guidance.corners[:1]])  # closed
         board = pg.PlotDataItem(
-            guidance.corners[:, 0], guidance.corners[:, 1], pen=pg.mkPen(*GUIDANCE_COLOR, width=4)
+            outline[:, 0], outline[:, 1], pen=pg.mkPen(*GUIDANCE_COLOR, width=4)
         )
         label = pg.TextItem(
             f"board for {guidance.sensor}", color=GUIDANCE_COLOR, anchor=(0.5, -0.4)
