@@ -10,11 +10,20 @@ if ! command -v dpkg-query >/dev/null 2>&1; then
     exit 0
 fi
 
+installed() {
+    [ "$(dpkg-query -W -f='${Status}' "$1" 2>/dev/null || true)" = "install ok installed" ]
+}
+
+# A line a|b|...: any one of them (the first this system's archive has, when none is).
 missing=()
-while read -r pkg; do
-    [ -z "$pkg" ] && continue
-    status="$(dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null || true)"
-    [ "$status" = "install ok installed" ] || missing+=("$pkg")
+while read -r line; do
+    [ -z "$line" ] && continue
+    IFS='|' read -ra alternatives <<< "$line"
+    found=0
+    for pkg in "${alternatives[@]}"; do
+        installed "$pkg" && { found=1; break; }
+    done
+    [ "$found" = 1 ] || missing+=("$line")
 done < <(sed -e 's/#.*//' -e 's/[[:space:]]//g' "$list")
 
 [ ${#missing[@]} -eq 0 ] && exit 0
@@ -28,7 +37,16 @@ else
     exit 1
 fi
 
-echo "optrack: installing system packages: ${missing[*]}" >&2
 export DEBIAN_FRONTEND=noninteractive
 "${sudo[@]}" apt-get update -qq
-"${sudo[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+chosen=()
+for line in "${missing[@]}"; do
+    IFS='|' read -ra alternatives <<< "$line"
+    pick="${alternatives[0]}"
+    for pkg in "${alternatives[@]}"; do
+        if apt-cache show "$pkg" >/dev/null 2>&1; then pick="$pkg"; break; fi
+    done
+    chosen+=("$pick")
+done
+echo "optrack: installing system packages: ${chosen[*]}" >&2
+"${sudo[@]}" apt-get install -y -qq --no-install-recommends "${chosen[@]}" >/dev/null

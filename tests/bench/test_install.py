@@ -36,3 +36,12 @@ def test_a_run_without_tracks_fails_with_its_stderr() -> None:
     command = [sys.executable, "-c", "import sys; sys.exit('no camera here')"]
     with pytest.raises(RuntimeError, match="no camera here"):
         watch_tracks(command, clean_env(), 30)
+
+
+def test_tracks_may_be_optional_but_the_exit_status_is_not() -> None:
+    quiet = [sys.executable, "-c", "pass"]
+    figures = watch_tracks(quiet, clean_env(), 30, to_end=True, need_tracks=False)
+    assert figures["first_tracks_s"] is None and figures["run_s"] < 30
+    failing = [sys.executable, "-c", "import sys; sys.exit(2)"]
+    with pytest.raises(RuntimeError, match="exit 2"):
+        watch_tracks(failing, clean_env(), 30, to_end=True, need_tracks=False)

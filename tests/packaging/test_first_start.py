@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from optrack.bench.install import clean_env, watch_tracks
 from tests.conftest import free_port
-from tests.packaging.conftest import clean_env, first_tracks_s
 
 pytestmark = pytest.mark.slow
 
@@ -21,9 +21,9 @@ def test_first_tracks_within_10_s_with_an_empty_cache(tmp_path: Path) -> None:
     assert optrack is not None
     config = tmp_path / "site.yaml"
     config.write_text(f"bus:\n  local_port: {free_port()}\n")
-    env = {**clean_env(), "XDG_CACHE_HOME": str(tmp_path / "cache"), "HOME": str(tmp_path)}
+    env = clean_env(XDG_CACHE_HOME=str(tmp_path / "cache"), HOME=str(tmp_path))
     command = [optrack, "run", "--headless", "--seconds", "30", "--config", str(config)]
-    first = first_tracks_s(command, env, timeout=30)
+    first = watch_tracks(command, env, timeout_s=30)["first_tracks_s"]
     print(json.dumps({"first_tracks_s": round(first, 1)}))
     assert first <= 10.0
     assert not (tmp_path / "cache" / "optrack").exists()  # nothing cached
