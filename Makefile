@@ -50,7 +50,8 @@ wheel: setup
 package: wheel
 	bash packaging/build-deb.sh
 
-# Builds both, installs the wheel in a fresh venv and the .deb on this machine (as root).
+# Builds both, installs the wheel in a fresh venv and the .deb on this machine (as root),
+# runs and removes them (docs/deploy.md, Tests). .ci/run runs it after make test.
 test-package: setup
 	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -m slow tests/packaging
 
