@@ -458,7 +458,8 @@ class RecordingOpener(QObject):
 
     def _restart(self, path: str | None) -> None:
         """Stop the embedded site (if one runs) and start it again playing ``path``
-        (None: its own sensors), with the outputs the window shows now."""
+        (None: its own sensors), with the outputs the window shows now and the skeleton
+        stages as its nodes run them."""
         window = self.window
         old = window.embedded_site
         config = self._config_with_outputs(old.config if old is not None else self.config)
