@@ -60,7 +60,10 @@ PARTITION_FRAMES: dict[str, tuple[str, ...]] = {
 }
 _ROOT_JOINT = {"left_arm": 4, "right_arm": 7, "left_leg": 10, "right_leg": 13}
 _YAW = 3
-_MOVING = [0, 1, 2, _YAW]  # the root numbers the motion model predicts by their velocity
+# The root numbers the motion model predicts by their velocity: where the person goes and
+# turns (persistent); not the pelvis's height, which bobs (gait, jumps, squats).
+_MOVING = [0, 1, _YAW]
+_STILL = np.array([0.3, 0.3, 1.0])  # m/s, m/s, rad/s of velocity that momentum ignores
 
 
 def motion_spread(params: Params, dt: float) -> np.ndarray:
@@ -131,8 +134,10 @@ class SkeletonFilter:
         self.estimate = np.zeros(D)
         self.particles = np.zeros((int(self.params.particles), D))
         self._areas = part_areas(shape)
-        # The root's velocity (x, y, z per second, heading rad/s), smoothed over frames.
+        # The root's velocity (x, y in m/s, heading in rad/s), smoothed over frames.
         self.velocity = np.zeros(len(_MOVING))
+        # Each area's support at the estimate's last fit (K, 2); None before one.
+        self.support: np.ndarray | None = None
 
     def reset(self, state: np.ndarray, spread: np.ndarray | float = 0.0) -> None:
         """Put every particle at ``state`` plus Gaussian noise of ``spread`` per number."""
@@ -151,20 +156,37 @@ class SkeletonFilter:
         if len(self.particles) != int(self.params.particles):
             self.reset(self.estimate)
         spread = motion_spread(self.params, dt)
+        spreads = {name: self._widened(spread, name) for name in PARTITIONS}
+        step = np.concatenate([spreads[name][list(dims)] for name, dims in PARTITIONS.items()])
         dt = min(max(float(dt), 0.0), float(self.params.max_dt))
         drift = np.zeros(D)
-        drift[_MOVING] = self.velocity * dt * float(self.params.momentum)
+        # Soft-thresholded: a standing person's estimate jitters by up to about 0.2 m/s and
+        # 0.5 rad/s, and carrying that over would feed it back (the heading drifts).
+        carried = np.sign(self.velocity) * np.maximum(np.abs(self.velocity) - _STILL, 0.0)
+        drift[_MOVING] = carried * dt * float(self.params.momentum)
         self.particles = _clamp(
-            self.particles + drift + self.rng.normal(size=self.particles.shape) * spread
+            self.particles + drift + self.rng.normal(size=self.particles.shape) * step
         )
         before = self.estimate.copy()
         for name in PARTITIONS:
-            self.anneal(points, name, int(self.params.layers), spread, gate=True)
+            self.anneal(points, name, int(self.params.layers), spreads[name], gate=True)
         if dt > 0.0:  # the root's velocity, smoothed: half the last frame's, half before
             moved = self.estimate[_MOVING] - before[_MOVING]
             moved[-1] = np.angle(np.exp(1j * moved[-1]))
             self.velocity = 0.5 * self.velocity + 0.5 * moved / dt
         return self.estimate.copy()
+
+    def _widened(self, spread: np.ndarray, partition: str) -> np.ndarray:
+        """``spread`` with a limb's numbers widened by up to ``1 + limb_search`` times where
+        its areas of interest held few of their points at the last :meth:`fit` (a limb
+        that lost its points searches further for them)."""
+        if partition == "torso" or self.support is None:
+            return spread
+        held = float(np.mean(self.support[PARTITION_PARTS[partition]]))
+        wider = spread.copy()
+        dims = list(PARTITIONS[partition])
+        wider[dims] *= 1.0 + float(self.params.limb_search) * (1.0 - held)
+        return wider
 
     def anneal(
         self,
@@ -251,6 +273,8 @@ class SkeletonFilter:
         counts = np.bincount(area[area >= 0], minlength=2 * len(PARTS)).reshape(-1, 2)
         expected = self.expected_support(len(points))
         support = np.minimum(1.0, counts / np.maximum(expected, 1e-9))
+        if state is self.estimate:
+            self.support = support
         return float(np.mean(area >= 0)) if len(area) else 0.0, support
 
 

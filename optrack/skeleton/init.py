@@ -34,6 +34,7 @@ __all__ = [
     "height_from_cloud",
     "initialise",
     "pose_log_likelihood",
+    "search_limb",
 ]
 
 LIMBS = ("left_arm", "right_arm", "left_leg", "right_leg")
@@ -118,7 +119,7 @@ def _from_heading(filt: SkeletonFilter, points: np.ndarray, heading: float) -> n
     filt.reset(guess, spread)
     filt.anneal(points, "torso", layers, spread, _TORSO_AND_LEGS)
     for name in LIMBS:
-        _search(filt, points, name)
+        search_limb(filt, points, name)
     # The finer rounds: every partition again, from this estimate, as slow frames would.
     fine = motion_spread(p, _FINE_DT)
     for _ in range(_FINE_ROUNDS):
@@ -128,7 +129,7 @@ def _from_heading(filt: SkeletonFilter, points: np.ndarray, heading: float) -> n
     return filt.estimate.copy()
 
 
-def _search(filt: SkeletonFilter, points: np.ndarray, limb: str) -> None:
+def search_limb(filt: SkeletonFilter, points: np.ndarray, limb: str) -> None:
     """A limb's coarse search: angles drawn uniformly within its limits, annealed over
     ``init_layers`` layers against the rest of the estimate."""
     dims = list(PARTITIONS[limb])

@@ -186,12 +186,30 @@ SKELETON_PARAMS = register(
             ),
             Param(
                 "momentum",
-                0.0,
+                0.8,
                 min=0.0,
                 max=1.0,
                 step=0.05,
                 help="Share of the root's last velocity (position and heading, smoothed over "
                 "frames) the particles move by before the random walk (0: a pure random walk).",
+            ),
+            Param(
+                "limb_search",
+                0.0,
+                min=0.0,
+                max=10.0,
+                step=0.1,
+                help="A limb whose areas of interest held none of their points at the last frame "
+                "diffuses 1 + this times its agility (in proportion to the support it lacks).",
+            ),
+            Param(
+                "limb_lost_support",
+                0.0,
+                min=0.0,
+                max=1.0,
+                step=0.05,
+                help="While tracking, a limb whose areas of interest hold under this share of "
+                "their points is searched again as initialisation does (0: never).",
             ),
             Param(
                 "max_dt",

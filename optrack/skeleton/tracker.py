@@ -32,10 +32,16 @@ from typing import Literal
 import numpy as np
 
 from optrack.params import Params
-from optrack.skeleton.filter import SkeletonFilter
-from optrack.skeleton.init import height_from_cloud, initialise
+from optrack.skeleton.filter import PARTITION_PARTS, SkeletonFilter
+from optrack.skeleton.init import (
+    LIMBS,
+    height_from_cloud,
+    initialise,
+    pose_log_likelihood,
+    search_limb,
+)
 from optrack.skeleton.joints import JOINTS
-from optrack.skeleton.model import PARTS, BodyShape, forward_kinematics
+from optrack.skeleton.model import PARTITIONS, PARTS, BodyShape, forward_kinematics
 from optrack.skeleton.params import SKELETON_PARAMS
 from optrack.skeleton.shape import ShapeSearch
 
@@ -55,6 +61,12 @@ def _areas_of_joints() -> list[list[tuple[int, int]]]:
 
 
 _JOINT_AREAS = _areas_of_joints()
+# The parts whose support tells whether a limb is lost: its bones (the feet, cut by the
+# fusion's floor margin, hold few points even when found).
+_LIMB_PARTS = {
+    limb: np.array([k for k in PARTITION_PARTS[limb] if not PARTS[k].name.endswith("foot")])
+    for limb in LIMBS
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,6 +113,8 @@ class SkeletonTracker:
         else:
             self.filter.step(points, dt)
         explained, support = self.filter.fit(points)
+        if self.state == "tracking" and self._search_lost_limbs(points, support):
+            explained, support = self.filter.fit(points)
         if explained < float(p.lost_fraction):
             return self._miss(float(stamp), explained)
         self._misses = 0
@@ -111,6 +125,28 @@ class SkeletonTracker:
             self.state = "initialising"
         self._advance_shape()
         return self._estimate(float(stamp), explained, support)
+
+    def _search_lost_limbs(self, points: np.ndarray, support: np.ndarray) -> bool:
+        """Search again, as initialisation does, each limb one of whose bones (upper arm,
+        forearm, thigh, shin) holds under ``limb_lost_support`` of the points its areas of
+        interest should hold; keep the new pose where the whole
+        body's likelihood rose. Returns whether a limb moved."""
+        threshold = float(self.params.limb_lost_support)
+        moved = False
+        for limb in LIMBS:
+            if support[_LIMB_PARTS[limb]].mean(axis=1).min() >= threshold:
+                continue
+            filt = self.filter
+            before = filt.estimate.copy()
+            score = pose_log_likelihood(filt, points, before)
+            search_limb(filt, points, limb)
+            if pose_log_likelihood(filt, points, filt.estimate) > score:
+                moved = True
+                filt.particles[:, list(PARTITIONS[limb])] = filt.estimate[list(PARTITIONS[limb])]
+            else:
+                filt.estimate = before
+                filt.particles[:, list(PARTITIONS[limb])] = before[list(PARTITIONS[limb])]
+        return moved
 
     def _sample_shape(self, points: np.ndarray, stamp: float) -> None:
         """Keep a tracked frame for the body's estimate; estimate it once there are enough."""

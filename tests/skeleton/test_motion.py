@@ -1,0 +1,101 @@
+"""The motion model: the root's velocity carried over (momentum) lets the filter follow a
+person who walks and turns fast, from their own clouds; a limb that lost its points
+searches wider (limb_search)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from optrack.skeleton.filter import SkeletonFilter, motion_spread
+from optrack.skeleton.joints import JOINTS
+from optrack.skeleton.model import PARTITIONS, BodyShape, forward_kinematics
+from optrack.skeleton.params import SKELETON_PARAMS
+from optrack.skeleton.tracker import SkeletonTracker
+from tests.skeleton.clouds import seen_cloud
+from tests.skeleton.test_filter import _pose
+
+SHAPE = BodyShape.from_height(1.75)
+SPEED = np.array([1.2, 0.3])  # m/s
+TURN = 3.0  # rad/s
+FRAMES = 24
+
+
+def _follow(momentum: float) -> float:
+    """Mean joint error (m) over the second half of a walk-and-turn, tracked from the
+    first frame's true pose."""
+    rng = np.random.default_rng(5)
+    start = _pose(SHAPE)
+    filt = SkeletonFilter(SHAPE, SKELETON_PARAMS.create({"momentum": momentum}), seed=1)
+    filt.reset(start)
+    errors = []
+    for k in range(1, FRAMES):
+        truth = start.copy()
+        truth[:2] += SPEED * k / 30
+        truth[3] += TURN * k / 30
+        estimate = filt.step(seen_cloud(truth, SHAPE, rng), 1 / 30)
+        if k >= FRAMES // 2:
+            found = forward_kinematics(estimate, SHAPE)[0][: len(JOINTS)]
+            joints = forward_kinematics(truth, SHAPE)[0][: len(JOINTS)]
+            errors.append(np.linalg.norm(found - joints, axis=1).mean())
+    return float(np.mean(errors))
+
+
+def test_momentum_follows_a_fast_walk_and_turn():
+    carried, still = _follow(0.8), _follow(0.0)
+    assert carried < 0.05, carried
+    assert carried < still, (carried, still)
+
+
+def test_velocity_is_the_roots_motion_per_second():
+    rng = np.random.default_rng(6)
+    start = _pose(SHAPE)
+    filt = SkeletonFilter(SHAPE, SKELETON_PARAMS.create({"momentum": 0.8}), seed=2)
+    filt.reset(start)
+    for k in range(1, 13):
+        truth = start.copy()
+        truth[:2] += SPEED * k / 30
+        truth[3] += TURN * k / 30
+        filt.step(seen_cloud(truth, SHAPE, rng), 1 / 30)
+    vx, vy, turn = filt.velocity
+    assert abs(vx - SPEED[0]) < 0.35 and abs(vy - SPEED[1]) < 0.35, filt.velocity
+    # The heading reads slow (about half): the pelvis's heading is weakly held, the spine's
+    # twist keeps the shoulders on the turn; it must still carry a turn, not the jitter.
+    assert 1.0 < turn < TURN + 1.0, filt.velocity
+
+
+def test_a_limb_without_support_diffuses_wider():
+    params = SKELETON_PARAMS.create({"limb_search": 2.0})
+    filt = SkeletonFilter(SHAPE, params, seed=0)
+    spread = motion_spread(params, 1 / 30)
+    assert np.array_equal(filt._widened(spread, "left_arm"), spread)  # no fit yet
+    filt.support = np.ones((13, 2))
+    left = list(PARTITIONS["left_arm"])
+    filt.support[[3, 4]] = 0.0  # the left upper arm and forearm held nothing
+    wider = filt._widened(spread, "left_arm")
+    assert np.allclose(wider[left], 3.0 * spread[left])
+    assert np.array_equal(filt._widened(spread, "right_arm"), spread)
+    assert np.array_equal(filt._widened(spread, "torso"), spread)
+
+
+def _raise_the_arm(lost_support: float) -> float:
+    """Left wrist error (m) after a tracked person's left arm jumps overhead in one frame."""
+    rng = np.random.default_rng(7)
+    params = SKELETON_PARAMS.create(
+        {"limb_lost_support": lost_support, "shape_seconds": 0.0, "particles": 1000}
+    )
+    tracker = SkeletonTracker(params, SHAPE, seed=3)
+    pose = _pose(SHAPE)
+    for k in range(3):
+        tracker.update(seen_cloud(pose, SHAPE, rng), k / 30)
+    raised = pose.copy()
+    raised[12:16] = [0.2, 2.9, 0.0, 0.2]  # abducted overhead, elbow nearly straight
+    for k in range(3, 7):
+        estimate = tracker.update(seen_cloud(raised, SHAPE, rng), k / 30)
+    wrist = JOINTS.index("left_wrist")
+    truth = forward_kinematics(raised, SHAPE)[0][wrist]
+    return float(np.linalg.norm(estimate.joints[wrist] - truth))
+
+
+def test_a_lost_limb_is_searched_again():
+    assert _raise_the_arm(0.3) < 0.08
+    assert _raise_the_arm(0.0) > 0.2  # without the search the arm stays where it was
