@@ -75,6 +75,18 @@ class RateMeter:
         return values[below] + (values[above] - values[below]) * (position - below)
 
 
+def live_schemas(
+    live: Mapping[str, Params] | None, node_params: Params, schemas: Mapping[str, Any]
+) -> dict[str, Params]:
+    """A node's live parameter sets: those given, each schema's defaults for the rest, and
+    the node's own parameters under ``node``."""
+    sets = dict(live or {})
+    for name, schema in schemas.items():
+        sets.setdefault(name, schema.create())
+    sets["node"] = node_params
+    return sets
+
+
 class Node:
     """Base of the detector, tracker and outputs nodes.
 

@@ -50,7 +50,7 @@ from optrack.net.messages import (
     TracksMessage,
 )
 from optrack.params import Params
-from optrack.runtime.node import Node, RateMeter
+from optrack.runtime.node import Node, RateMeter, live_schemas
 from optrack.runtime.skeleton_params import SKELETON_LIVE_PARAMS
 from optrack.types import Detection, RGBDFrame, Skeleton, SkeletonBatch, TrackBatch
 
@@ -194,11 +194,15 @@ class SkeletonNode(Node):
         from optrack.skeleton.fusion import FUSION_PARAMS
         from optrack.skeleton.params import SKELETON_PARAMS
 
-        live = dict(live or {})
-        live.setdefault("skeleton_live", SKELETON_LIVE_PARAMS.create())
-        live.setdefault("skeleton", SKELETON_PARAMS.create())
-        live.setdefault("skeleton_fusion", FUSION_PARAMS.create())
-        live["node"] = node_params
+        live = live_schemas(
+            live,
+            node_params,
+            {
+                "skeleton_live": SKELETON_LIVE_PARAMS,
+                "skeleton": SKELETON_PARAMS,
+                "skeleton_fusion": FUSION_PARAMS,
+            },
+        )
         super().__init__(bus, "skeleton", node_params, live, logger)
         self.params = live["skeleton_live"]
         self.clock = clock

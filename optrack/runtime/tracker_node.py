@@ -44,7 +44,7 @@ from optrack.net.messages import CalibrationMessage, DetectionsMessage, TracksMe
 from optrack.params import Params
 from optrack.runtime.calibration_store import CalibrationStore
 from optrack.runtime.detector_node import CalibrationRequest
-from optrack.runtime.node import Node, RateMeter
+from optrack.runtime.node import Node, RateMeter, live_schemas
 from optrack.types import DetectionBatch, NetworkCalibration, TrackBatch
 
 __all__ = ["TrackerLike", "TrackerNode"]
@@ -82,11 +82,15 @@ class TrackerNode(Node):
         from optrack.tracking.params import APPEARANCE_PARAMS, SMOOTHING_PARAMS, TRACKING_PARAMS
         from optrack.tracking.smoothing import OutputSmoother
 
-        live = dict(live or {})
-        live.setdefault("tracking", TRACKING_PARAMS.create())
-        live.setdefault("appearance", APPEARANCE_PARAMS.create())
-        live.setdefault("smoothing", SMOOTHING_PARAMS.create())
-        live["node"] = node_params
+        live = live_schemas(
+            live,
+            node_params,
+            {
+                "tracking": TRACKING_PARAMS,
+                "appearance": APPEARANCE_PARAMS,
+                "smoothing": SMOOTHING_PARAMS,
+            },
+        )
         self.tracker = (
             tracker if tracker is not None else Tracker(live["tracking"], live["appearance"])
         )

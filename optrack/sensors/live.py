@@ -226,8 +226,13 @@ class LiveSensor(Sensor):
         self._opened = False
         self._lock = threading.RLock()
         self._closing = threading.Event()
+        self._init_backend()
 
     # ----------------------------------------------------------- subclasses
+    def _init_backend(self) -> None:
+        """Set the backend's own state (nothing opened yet); raise SensorError when the
+        backend's library is missing."""
+
     @abc.abstractmethod
     def _open_device(self) -> SensorInfo:
         """Open the device, start its streams; return its description. Raise SensorError."""

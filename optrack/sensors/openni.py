@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from optrack.params import Param, Params, Schema, register
+from optrack.params import Param, Schema, register
 from optrack.recording.format import SensorInfo
 from optrack.sensors.base import SensorError, stream_mode_params
 from optrack.sensors.live import DeviceLost, LiveSensor, Mode, live_params, nearest_mode
@@ -134,14 +134,7 @@ class OpenNISensor(LiveSensor):
     schema = OPENNI_PARAMS
     scheme = "openni"
 
-    def __init__(
-        self,
-        target: str = "",
-        params: Params | None = None,
-        sensor_id: str | None = None,
-        uri: str = "",
-    ) -> None:
-        super().__init__(target, params, sensor_id, uri)
+    def _init_backend(self) -> None:
         self.device: Any = None
         self.model = ""
         self.intrinsics_source = ""

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from optrack.params import Param, Params, Schema, register
+from optrack.params import Param, Schema, register
 from optrack.recording.format import SensorInfo
 from optrack.sensors.base import SensorError, stream_mode_params
 from optrack.sensors.live import DeviceLost, LiveSensor, Mode, live_params, nearest_mode
@@ -112,14 +112,7 @@ class RealSenseSensor(LiveSensor):
     schema = REALSENSE_PARAMS
     scheme = "realsense"
 
-    def __init__(
-        self,
-        target: str = "",
-        params: Params | None = None,
-        sensor_id: str | None = None,
-        uri: str = "",
-    ) -> None:
-        super().__init__(target, params, sensor_id, uri)
+    def _init_backend(self) -> None:
         import_pyrealsense2()  # fail at once, with the sentence, when it is missing
         self.model = ""
         self.modes: dict[str, Mode] = {}
