@@ -157,13 +157,15 @@ def _loopback(endpoint: str) -> bool:
 
 def site_identity(params: Params, node: str = "") -> tuple[SiteIdentities, str] | None:
     """The keys and the identity this node presents, or None when it joins without
-    (``bus.insecure``). A local site (or a client of a hub on this computer) without
-    ``bus.keys`` uses this user's own keys, made on first start."""
+    (``bus.insecure`` on, in any mode but ``local``). A local site (or a client of a hub on
+    this computer) without ``bus.keys`` uses this user's own keys, made on first start."""
     folder = str(params.keys).strip()
     if folder:
         identities = SiteIdentities(folder)
         return identities, identities.require(str(params.identity).strip() or node)
     mode = str(params.mode)
+    if mode != "local" and bool(params.insecure):
+        return None  # even to a hub on this computer: an insecure peer site's is plain tcp
     links = endpoints(str(params.listen)) + endpoints(str(params.connect))
     on_this_computer = mode == "local" or (
         mode == "client"
@@ -173,8 +175,6 @@ def site_identity(params: Params, node: str = "") -> tuple[SiteIdentities, str] 
     )
     if on_this_computer:
         return SiteIdentities(local_keys()), LOCAL_IDENTITY
-    if bool(params.insecure):
-        return None
     raise BusConfigError(
         f"bus.mode {mode} without site keys would let anyone on the network join the site; "
         "make keys with 'optrack site init', copy them here and set bus.keys, or start with "

@@ -68,7 +68,8 @@ def cmd_site_init(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """``optrack run [--headless] [--seconds S] [--udp HOST:PORT] [--config FILE]
-    [--recording PATH [--speed S] [--loop]]``."""
+    [--recording PATH [--speed S] [--loop]] [--skeleton] [--nodes all|tracker|detectors]
+    [--insecure]``."""
     from optrack.outputs.streams import DEFAULT_UDP_PORT
     from optrack.outputs.udp import parse_destinations, resolve_destination
     from optrack.runtime.config import load_node_config
@@ -78,7 +79,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     for text in args.udp or ():  # refused here, not by a tracker node restarting in a loop
         for host, port in parse_destinations(text, DEFAULT_UDP_PORT, "--udp destination"):
             resolve_destination("--udp", host, port)
-    config = load_node_config(args.config)
+    insecure = getattr(args, "insecure", False)
+    config = load_node_config(args.config, {"bus": {"insecure": True}} if insecure else None)
     setup_logging("optrack run")
     site = Site(
         config,
@@ -133,6 +135,7 @@ def add_commands(commands: Any, command: Any) -> None:
         help="a site over several computers: start only this computer's part (tracker: "
         "every node but the detectors; detectors: the detector nodes of site.sensors)",
     )
+    p.add_argument("--insecure", action="store_true", help=INSECURE_HELP)
 
     node = add_group(
         commands, "node", "Run one node of a distributed site.", "node_command", "NODE"

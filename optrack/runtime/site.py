@@ -173,6 +173,9 @@ class Site:
         )
         common["bus"]["gossip"] = False
         common["bus"].pop("identity", None)  # each node presents its own (bus.keys)
+        # An insecure peer hub listens on plain tcp: its nodes join it the same way (and
+        # a secure one's with keys, whatever the user's file says of bus.insecure).
+        common["bus"]["insecure"] = self.hub is not None and self.hub.insecure
         common.setdefault("node", {})["state_dir"] = str(state_dir(self.config, self.name))
         common["outputs"] = self.config["outputs"].as_dict()
         paths = {}
@@ -190,6 +193,13 @@ class Site:
                 values["node"]["outputs"] = True
             paths[role] = run_dir / f"{role}.yaml"
             save_config(paths[role], values)
+        if str(self.config["bus"].mode) != "local":  # the window joins this hub as they do
+            values = {stage: dict(v) for stage, v in common.items()}
+            identity = self.config.explicit.get("bus", {}).get("identity")
+            if identity:  # the station's certificate of bus.keys
+                values["bus"]["identity"] = identity
+            paths["gui"] = run_dir / "gui.yaml"
+            save_config(paths["gui"], values)
         return paths
 
     def _children(self, uris: list[str], configs: dict[str, Path]) -> list[Child]:
@@ -227,8 +237,9 @@ class Site:
             problem = display_problem()
             if problem is None:
                 args = ["gui", "--join", "--site", self.name]
-                if self.config.path is not None:
-                    args += ["--config", str(self.config.path)]
+                config = configs.get("gui", self.config.path)
+                if config is not None:
+                    args += ["--config", str(config)]
                 children.append(Child("gui", "gui", "optrack.cli", args))
             else:
                 log.info("no window (%s); running headless.", problem)
@@ -282,6 +293,13 @@ class Site:
         if self.hub is None:
             self.hub = Bus(self.name, "site", self.config["bus"], host=True)
             self.hub.subscribe(self.hub.keys.status(), StatusMessage, self._on_status)
+            if self.hub.insecure:
+                log.warning(
+                    "site '%s' runs insecure (bus.insecure, no keys): anyone on the network "
+                    "may join it and send commands; secure it with 'optrack site init' and "
+                    "bus.keys.",
+                    self.name,
+                )
 
     def start(self) -> None:
         """Host the hub, render/prepare the sensors (progress in the site status), start
@@ -405,6 +423,8 @@ class Site:
             values[f"restarts.{child.name}"] = child.restarts
         if self.operator is not None:
             values.update(self.operator.status_values())
+        if self.hub is not None and self.hub.insecure:  # as every node's status says
+            values["insecure"] = True
         return StatusMessage(
             node="site",
             role="site",

@@ -6,8 +6,9 @@ import json
 
 import pytest
 
-from optrack.net.config import BUS_PARAMS, BusConfigError, zenoh_config
+from optrack.net.config import BUS_PARAMS, BusConfigError, site_identity, zenoh_config
 from optrack.net.keys import BusNameError, SiteKeys
+from optrack.net.security import LOCAL_IDENTITY
 
 
 def get(config, key: str):
@@ -104,3 +105,19 @@ def test_zenoh_config_file_is_used_as_it_is(tmp_path):
 def test_missing_zenoh_config_file_says_so(tmp_path):
     with pytest.raises(BusConfigError, match="does not exist"):
         zenoh_config(BUS_PARAMS.create({"zenoh_config": str(tmp_path / "nope.json5")}))
+
+
+def test_an_insecure_client_of_a_hub_on_this_computer_joins_as_plain_tcp(tmp_path, monkeypatch):
+    """The nodes of an insecure peer site join its hub over loopback without TLS (the hub
+    listens on plain tcp); without bus.insecure they present this user's local keys, and a
+    local site ignores bus.insecure."""
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path))
+    loopback = {"mode": "client", "connect": "tcp/127.0.0.1:7447", "multicast_scouting": False}
+    config = zenoh_config(BUS_PARAMS.create({**loopback, "insecure": True}))
+    assert get(config, "connect/endpoints") == ["tcp/127.0.0.1:7447"]
+    assert site_identity(BUS_PARAMS.create({**loopback, "insecure": True})) is None
+    assert site_identity(BUS_PARAMS.create(loopback))[1] == LOCAL_IDENTITY
+    assert get(zenoh_config(BUS_PARAMS.create(loopback)), "connect/endpoints") == [
+        "tls/127.0.0.1:7447"
+    ]
+    assert site_identity(BUS_PARAMS.create({"insecure": True}))[1] == LOCAL_IDENTITY

@@ -180,6 +180,57 @@ def test_peer_mode_without_keys_refuses_to_start_and_insecure_says_so_in_every_s
         client.close()
 
 
+def test_an_insecure_peer_site_runs_its_nodes_on_the_hubs_transport_and_says_so(
+    venue, tmp_path, processes
+):
+    """`optrack run --insecure` in peer mode without keys: the hub listens on plain tcp, so
+    its nodes must join it without TLS (not with this computer's local keys), and every
+    status, the launcher's included, says insecure."""
+    port = free_port()
+    config = tmp_path / "site.yaml"
+    links = {"listen": f"tcp/127.0.0.1:{port}", "multicast_scouting": False, "gossip": False}
+    config.write_text(
+        yaml.safe_dump(
+            {
+                "site": {"name": "lab", "sensors": f"file://{venue}?loop=restart#kinect2_0"},
+                "bus": {"mode": "peer", "local_port": port, **links},
+                "node": {"state_dir": str(tmp_path / "state"), "status_period_s": 0.2},
+                "outputs": {"udp": ""},
+            }
+        )
+    )
+    launcher = processes.start(
+        ["optrack.cli", "run", "--headless", "--insecure", "--config", str(config)], "launcher"
+    )
+    statuses: dict[str, StatusMessage] = {}
+    client = Bus(
+        "lab",
+        "observer",
+        BUS_PARAMS.create(
+            {
+                "mode": "peer",
+                "connect": f"tcp/127.0.0.1:{port}",
+                "multicast_scouting": False,
+                "gossip": False,
+                "insecure": True,
+                "connect_timeout_s": 60.0,
+            }
+        ),
+    )
+    try:
+        client.subscribe(
+            client.keys.status(), StatusMessage, lambda m, k: statuses.__setitem__(m.node, m)
+        )
+        nodes = {"site", "tracker", "outputs", "kinect2_0"}
+        wait_until(lambda: nodes <= set(statuses) or launcher.poll() is not None, 120)
+        assert nodes <= set(statuses), processes.output(launcher)[-3000:]
+        assert all(statuses[node].values.get("insecure") is True for node in nodes)
+        assert statuses["site"].values["restarts.tracker"] == 0
+        assert statuses["site"].values["restarts.kinect2_0"] == 0
+    finally:
+        client.close()
+
+
 def test_the_websocket_outputs_origins_and_token_are_output_parameters():
     outputs = Outputs(
         OUTPUTS_PARAMS.create(
