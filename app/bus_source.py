@@ -5,9 +5,18 @@ subscribes to the site's tracks, detections, calibration, statuses and
 previews, computes the outputs' packet rates, keeps the outputs as lists of
 destinations and sends the operator's parameter changes and commands); this
 class only re-emits its events as :class:`~app.source.SiteSource` signals,
-which Qt queues to the window's thread. Joining the bus can take seconds, so
-it happens on the client's thread; the window stays responsive and hears the
+emitted on the window's thread. Joining the bus can take seconds, so it
+happens on the client's thread; the window stays responsive and hears the
 outcome on ``connection`` and ``log``.
+
+A site can send faster than a loaded window draws (tracks at hundreds a
+second, a busy computer): the client holds what arrives
+(:meth:`~optrack.client.SiteClient.deliver_later`), the newest tracks,
+skeletons and calibration and each node's newest status and sensor's newest
+preview replacing older ones not yet shown, and wakes the window's thread
+once; that thread emits all of it in one pass of its event loop. So at most
+one delivery waits in the event loop at any time, and however fast the site
+sends, the window's thread never falls behind by more than one pass.
 """
 
 from __future__ import annotations
@@ -15,6 +24,8 @@ from __future__ import annotations
 import os
 import threading
 from typing import Any
+
+from PySide6.QtCore import Qt, Signal
 
 from app.source import SiteSource
 from optrack.client import EVENTS, SiteClient
@@ -26,6 +37,8 @@ __all__ = ["BusSource"]
 
 class BusSource(SiteSource):
     """A site on the bus. ``bus_params`` are the ``bus`` stage's values (mode, endpoints)."""
+
+    _wake = Signal()  # something arrived: deliver it on this object's (the window's) thread
 
     def __init__(
         self,
@@ -44,6 +57,8 @@ class BusSource(SiteSource):
         )
         for event in EVENTS:  # each event of the client is the signal of the same name
             self.client.on(event, getattr(self, event).emit)
+        self._wake.connect(self._deliver, Qt.ConnectionType.QueuedConnection)
+        self.client.deliver_later(self._wake.emit)
         self.client.start()
 
     @property
@@ -57,6 +72,14 @@ class BusSource(SiteSource):
     @property
     def connected(self) -> bool:
         return self.client.connected
+
+    def _deliver(self) -> None:
+        self.client.deliver()
+
+    @property
+    def insecure(self) -> bool:
+        """The site runs without keys (no TLS, no access control)."""
+        return self.client.insecure
 
     def describe(self) -> str:
         return self.client.describe()

@@ -17,7 +17,12 @@ site's bus as one more node (like rviz) and
 Joining can take seconds (a local site's hub is still starting, a remote one
 is far), so it happens on a thread that :meth:`SiteClient.start` starts; its
 outcome is a ``connection`` or a ``log`` event. Callbacks run on that thread
-or on the bus's threads: keep them short.
+or on the bus's threads: keep them short. A client that cannot keep up with
+the site (a window's thread) calls :meth:`SiteClient.deliver_later`: the
+events are then held, the newest of each kind (:data:`NEWEST`) replacing the
+one not yet delivered, and handed to the callbacks when it calls
+:meth:`SiteClient.deliver`, so a site sending faster than the client runs
+can never pile up work for it.
 
 Example (a headless tool)::
 
@@ -31,6 +36,7 @@ Example (a headless tool)::
 
 from __future__ import annotations
 
+import itertools
 import os
 import threading
 import time
@@ -50,6 +56,7 @@ from optrack.net import (
     StatusMessage,
     TracksMessage,
 )
+from optrack.net.config import check_station
 from optrack.net.messages import SkeletonsMessage
 from optrack.outputs.streams import OUTPUT_PORTS
 from optrack.outputs.udp import join_destinations, parse_address, split_destinations
@@ -59,7 +66,7 @@ from optrack.runtime.detector_node import CalibrationRequest
 from optrack.runtime.preview import decode_preview
 from optrack.types import NetworkCalibration, SensorCalibration, TrackBatch
 
-__all__ = ["EVENTS", "SiteClient"]
+__all__ = ["EVENTS", "NEWEST", "SiteClient"]
 
 #: What a site tells its client, and the arguments each event's callbacks get:
 #: ``tracks(TrackBatch)``, ``detections(DetectionBatch)`` (one sensor's, world frame),
@@ -84,6 +91,20 @@ EVENTS = (
     "command_reply",
     "skeletons",
 )
+
+#: The events of which only the newest matters, and what makes two of them the same
+#: one (their arguments -> a key): a held event of these is replaced by a newer one. Every
+#: other event is delivered, in order. A status carries its node's running counts, and the
+#: outputs' rates are computed as each arrives, so keeping the newest loses no count.
+NEWEST: dict[str, Callable[[tuple[Any, ...]], str]] = {
+    "tracks": lambda args: "",
+    "skeletons": lambda args: "",
+    "calibration": lambda args: "",
+    "status": lambda args: str(args[0]),  # per node
+    "detections": lambda args: str(args[0].sensor_id),  # per sensor
+    "preview": lambda args: str(args[0]),
+    "cloud": lambda args: str(args[0]),
+}
 
 Callback = Callable[..., None]
 
@@ -128,6 +149,12 @@ class SiteClient:
         self._site_calibration = False
         self._preview_calibration = NetworkCalibration()
         self._detectors: dict[str, str] = {}  # detector node -> its last state
+        self._wake: Callable[[], None] | None = None  # set: events held for deliver()
+        self._held: dict[tuple[str, Any], tuple[Any, ...]] = {}
+        self._held_lock = threading.Lock()
+        self._order = itertools.count()
+        #: events not delivered because a newer one of the same kind replaced them
+        self.replaced = 0
         register_node_stages()  # every stage a node may run has its schema known
 
     # ---------------------------------------------------------- callbacks
@@ -138,8 +165,36 @@ class SiteClient:
         self._callbacks[event].append(callback)
 
     def _emit(self, event: str, *args: Any) -> None:
+        wake = self._wake
+        if wake is None:
+            self._call(event, args)
+            return
+        newest = NEWEST.get(event)
+        key = (event, newest(args) if newest is not None else next(self._order))
+        with self._held_lock:
+            first = not self._held
+            self.replaced += key in self._held
+            self._held[key] = args  # a newer one keeps the older one's place in line
+        if first:
+            wake()
+
+    def _call(self, event: str, args: tuple[Any, ...]) -> None:
         for callback in self._callbacks[event]:
             callback(*args)
+
+    def deliver_later(self, wake: Callable[[], None]) -> None:
+        """Hold the events from now on; ``wake()`` (called on a bus thread) says that the
+        first is held, so that the caller's own thread runs :meth:`deliver` soon. Until it
+        does, a newer event of a kind in :data:`NEWEST` replaces the one held."""
+        self._wake = wake
+
+    def deliver(self) -> int:
+        """Call back with every event held (on the calling thread); how many."""
+        with self._held_lock:
+            held, self._held = self._held, {}
+        for (event, _), args in held.items():
+            self._call(event, args)
+        return len(held)
 
     # ------------------------------------------------------------ joining
     def start(self) -> None:
@@ -155,7 +210,11 @@ class SiteClient:
     def _open(self) -> Bus | None:
         while True:
             try:
-                return Bus(self.site, self.node, self.bus_params)
+                warning = check_station(self.bus_params, self.node)
+                bus = Bus(self.site, self.node, self.bus_params)
+                if warning:
+                    self._emit("log", "warning", warning)
+                return bus
             except BusError as error:
                 retry = self.retry_while
                 if retry is not None and retry.is_set() and not self._closed:
@@ -195,6 +254,17 @@ class SiteClient:
     @property
     def connected(self) -> bool:
         return self.bus is not None and not self.bus.closed
+
+    @property
+    def insecure(self) -> bool:
+        """Whether the site runs without keys: this client joined it without (no TLS, no
+        access control), or a node's status says so."""
+        bus = self.bus
+        if bus is not None and bus.insecure:
+            return True
+        with self._lock:
+            statuses = list(self._statuses.values())
+        return any((status.get("values") or {}).get("insecure") for status in statuses)
 
     def describe(self) -> str:
         """The site in a few words ("Site 'default' on this computer")."""

@@ -317,3 +317,53 @@ def test_a_parameter_update_carries_the_clients_name(hub, site):
     wait_until(lambda: client.set_params("detection", {"voxel_size": 0.07}) or received)
     assert received[0].updates == {"detection": {"voxel_size": 0.07}}
     assert received[0].sender == "tool"
+
+
+def test_held_events_keep_the_newest_batch_and_each_nodes_newest_status(hub, bus_params):
+    """A client that delivers later (a window's thread): a flood of tracks and statuses
+    wakes it once, and what it delivers is the newest batch and each node's newest status
+    (with its running counts), every other event in order."""
+    client = SiteClient("test", bus_params, node="tool")
+    events = Events(client)
+    wakes = []
+    client.deliver_later(lambda: wakes.append(time.monotonic()))
+    client.start()
+    try:
+        assert client.wait_connected(10.0)
+        wait_until(lambda: wakes)  # the joining's connection and log
+        client.deliver()
+        assert [name for name, _ in [events.got.get(timeout=1) for _ in range(2)]] == [
+            "connection",
+            "log",
+        ]
+        wakes.clear()
+        probe = TrackBatch(stamp=0.0, seq=0)  # until Zenoh routes the new subscription
+        probe_message = TracksMessage(batch=probe)  # reliable, as every batch after it
+        wait_until(lambda: hub.publish(hub.keys.tracks, probe_message, realtime=False) or wakes)
+        last = 1000
+        for seq in range(1, last + 1):
+            batch = TrackBatch(stamp=float(seq), seq=seq, tracks=[Track(1, seq * 0.001, 0.0, 1.7)])
+            hub.publish(hub.keys.tracks, TracksMessage(batch=batch), realtime=False)
+            for node in ("door", "hall"):
+                status = StatusMessage(
+                    node=node, role="detector", state="running", stamp=seq, counters={"n": seq}
+                )
+                hub.publish(hub.keys.status(node), status, realtime=False)
+        wait_until(lambda: client.latest_tracks is not None and client.latest_tracks.seq == last)
+        wait_until(lambda: {s["counters"]["n"] for s in client.statuses().values()} == {last})
+        assert len(wakes) == 1  # nothing delivered meanwhile: woken once
+        assert events.got.empty()  # nothing called back before deliver()
+        delivered = client.deliver()
+        got = [events.got.get_nowait() for _ in range(delivered)]
+        tracks = [args[0] for name, args in got if name == "tracks"]
+        assert [batch.seq for batch in tracks] == [last]
+        statuses = {args[0]: args[1] for name, args in got if name == "status"}
+        assert {node: s["counters"]["n"] for node, s in statuses.items()} == {
+            "door": last,
+            "hall": last,
+        }
+        assert [name for name, _ in got].count("schemas") <= 1
+        assert client.replaced >= 2 * last
+        assert events.got.empty() and client.deliver() == 0
+    finally:
+        client.close()

@@ -30,7 +30,9 @@ import zenoh
 
 from optrack.errors import UserError
 from optrack.net.security import (
+    CA_KEY_FILE,
     LOCAL_IDENTITY,
+    OPERATOR_ROLES,
     SiteIdentities,
     access_control,
     local_keys,
@@ -38,7 +40,14 @@ from optrack.net.security import (
 )
 from optrack.params import Param, Params, Schema, register
 
-__all__ = ["BUS_PARAMS", "BusConfigError", "endpoints", "site_identity", "zenoh_config"]
+__all__ = [
+    "BUS_PARAMS",
+    "BusConfigError",
+    "check_station",
+    "endpoints",
+    "site_identity",
+    "zenoh_config",
+]
 
 BUS_PARAMS = register(
     Schema(
@@ -179,6 +188,47 @@ def site_identity(params: Params, node: str = "") -> tuple[SiteIdentities, str] 
         f"bus.mode {mode} without site keys would let anyone on the network join the site; "
         "make keys with 'optrack site init', copy them here and set bus.keys, or start with "
         "--insecure (bus.insecure) to run open."
+    )
+
+
+def check_station(params: Params, node: str) -> str:
+    """What an operator station (a window, a tool named ``node``) lacks to join a site with
+    these ``bus`` values, in one sentence naming the folder and the command: raised
+    (:class:`BusConfigError`, :class:`~optrack.net.security.KeysError`) when it cannot
+    join; returned when it can join but not operate (its identity is not a station's);
+    "" when nothing lacks."""
+    if params.zenoh_config:
+        return ""
+    folder = str(params.keys).strip()
+    mode = str(params.mode)
+    if not folder:
+        try:
+            site_identity(params, node)
+        except BusConfigError:
+            raise BusConfigError(
+                f"joining a site over the network (bus.mode {mode}) needs the site's keys: "
+                "copy the folder made by 'optrack site init --out FOLDER --stations NAME' to "
+                "this computer and set bus.keys: FOLDER and bus.identity: NAME in the --config "
+                "file (or bus.insecure: true to join a site started with --insecure)."
+            ) from None
+        return ""
+    identities = SiteIdentities(folder)
+    name = str(params.identity).strip()
+    if not name and node not in identities.roles:
+        stations = sorted(n for n, role in identities.roles.items() if role == "station")
+        held = f"its stations: {', '.join(stations)}" if stations else "it holds no station"
+        raise BusConfigError(
+            f"bus.identity is empty: set it to this station's name in the site keys in "
+            f"{identities.folder} ({held}), or add one with 'optrack site init --out "
+            f"{identities.folder} --stations NAME' on the computer that holds {CA_KEY_FILE}."
+        )
+    role = identities.roles[identities.require(name or node)]
+    if role in OPERATOR_ROLES:
+        return ""
+    return (
+        f"bus.identity '{name or node}' is the {role}'s: this station sees the site, but the "
+        "site's computers drop its parameter changes and commands; use a station's identity "
+        f"('optrack site init --out {identities.folder} --stations NAME')."
     )
 
 

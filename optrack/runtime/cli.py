@@ -135,7 +135,12 @@ def add_commands(commands: Any, command: Any) -> None:
         help="a site over several computers: start only this computer's part (tracker: "
         "every node but the detectors; detectors: the detector nodes of site.sensors)",
     )
-    p.add_argument("--insecure", action="store_true", help=INSECURE_HELP)
+    p.add_argument(
+        "--insecure",
+        action="store_true",
+        help="a peer site without keys: no TLS, no access control (anyone on the network may "
+        "join); its nodes join the same way and every status says so",
+    )
 
     node = add_group(
         commands, "node", "Run one node of a distributed site.", "node_command", "NODE"
@@ -159,7 +164,11 @@ def add_commands(commands: Any, command: Any) -> None:
     q.add_argument("--site", required=True, help="site name")
     q.add_argument("--config", help="YAML configuration")
     q.add_argument("--insecure", action="store_true", help=INSECURE_HELP)
+    _add_site_commands(commands, command)
 
+
+def _add_site_commands(commands: Any, command: Any) -> None:
+    """Declare ``optrack site init``."""
     site = add_group(commands, "site", "A site's keys.", "site_command", "STEP")
     q = command(
         "init",

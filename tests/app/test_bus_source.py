@@ -1,6 +1,10 @@
 """The GUI's bus client against a real Zenoh hub on loopback (no display needed)."""
 
+import threading
+import time
+
 import pytest
+from PySide6.QtCore import QObject, QTimer, Slot
 
 from app.bus_source import BusSource
 from optrack.net import BUS_PARAMS, Bus, ParamsMessage, StatusMessage, TracksMessage
@@ -92,3 +96,60 @@ def test_no_hub_is_explained_in_a_sentence(qtbot):
     assert "cannot reach the local site's hub" in said.args[1]
     assert not source.connected
     source.close()
+
+
+class LoadedWindow(QObject):
+    """A window whose thread takes 5 ms to draw each batch."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.shown: list[int] = []
+
+    @Slot(object)
+    def draw(self, batch: TrackBatch) -> None:
+        self.shown.append(batch.seq)
+        time.sleep(0.005)
+
+
+def test_a_flood_of_tracks_never_starves_a_loaded_window_and_the_newest_is_shown(qtbot, hub):
+    """A site sending tracks far faster than the window's thread draws them (5 ms a batch
+    here): the event loop keeps turning (a 20 ms timer keeps firing), the tracks signal
+    fires at most once per pass, never for a stale batch, and the newest batch is shown."""
+    bus, params = hub
+    source = joined(qtbot, params)
+    window = LoadedWindow()  # lives on this (the window's) thread, as the real one
+    shown = window.shown
+    ticks: list[float] = []
+    timer = QTimer()
+    timer.timeout.connect(lambda: ticks.append(time.monotonic()))
+    try:
+        source.tracks.connect(window.draw)
+        probe = TracksMessage(batch=TrackBatch(0.0))  # until Zenoh routes the subscription
+        qtbot.waitUntil(
+            lambda: bus.publish(bus.keys.tracks, probe, realtime=False) or bool(shown),
+            timeout=5000,
+        )
+        last = 2000
+        sent = threading.Event()
+
+        def flood() -> None:
+            for seq in range(1, last + 1):
+                batch = TrackBatch(stamp=float(seq), seq=seq, tracks=[Track(1, 0.0, 0.0, 1.7)])
+                bus.publish(bus.keys.tracks, TracksMessage(batch=batch), realtime=False)
+            sent.set()
+
+        shown.clear()
+        timer.start(20)
+        started = time.monotonic()
+        threading.Thread(target=flood, daemon=True).start()
+        qtbot.waitUntil(lambda: sent.is_set() and shown[-1:] == [last], timeout=60000)
+        flood_s = time.monotonic() - started
+        timer.stop()
+        assert shown == sorted(set(shown))  # in order, none twice
+        assert len(shown) <= last // 4, (len(shown), flood_s)
+        gaps = [b - a for a, b in zip([started, *ticks], ticks, strict=False)]
+        assert ticks and max(gaps) < 2.0, (max(gaps), flood_s)  # 2000 x 5 ms = 10 s if queued
+        assert source.client.replaced >= last - len(shown)
+    finally:
+        timer.stop()
+        source.close()
