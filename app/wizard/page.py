@@ -91,6 +91,7 @@ class WizardPage(QWizardPage):
         layout.addWidget(self.error)
         layout.addWidget(self.progress)
         self.busy = False
+        self.pending = 0  # jobs submitted by run() and not ended yet
 
     @property
     def calibration_wizard(self) -> CalibrationWizard:
@@ -139,19 +140,26 @@ class WizardPage(QWizardPage):
                 failed(NO_SESSION)
             return
         self.show_error("")
+        # Busy until every job asked for has ended (Solve after a capture queues "stop" then
+        # "solve": the page is not done when the first one ends).
+        self.pending += 1
         self.set_busy(True)
         if sentence:
             self.progress.begin(sentence)
 
+        def ended() -> None:
+            self.pending -= 1
+            if not self.pending:
+                self.progress.end()
+                self.set_busy(False)
+
         def finished(result: Any) -> None:
-            self.progress.end()
-            self.set_busy(False)
+            ended()
             if done is not None:
                 done(result)
 
         def refused(text: str) -> None:
-            self.progress.end()
-            self.set_busy(False)
+            ended()
             self.show_error(text)
             if failed is not None:
                 failed(text)

@@ -178,6 +178,11 @@ class RefinementPage(WizardPage):
         if state.refinement_samples:
             counts = ", ".join(f"{s} {n}" for s, n in sorted(state.refinement_samples.items()))
             self.samples.setText(f"Detections of the walker: {counts}.")
+        if state.phase == "refinement" and state.walk:
+            # The walk so far, as each sensor sees it with the calibration being refined; the
+            # after plot comes with the refinement.
+            self.before.set_trajectories(state.walk)
+            self.after.setVisible(False)
         if state.refinement is not None and state.refinement is not self.shown:
             self.show_report(state.refinement)
 

@@ -184,3 +184,6 @@ class LiveState:
     intrinsics_results: dict[str, IntrinsicsResult] = dataclasses.field(default_factory=dict)
     # extrinsics: where to hold the board for a camera not calibrated yet (None: no advice)
     guidance: BoardSuggestion | None = None
+    # refinement: the walker's positions so far as each sensor sees them (sensor -> Nx3, in
+    # the solved calibration's world), drawn while the person walks
+    walk: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)

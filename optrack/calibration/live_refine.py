@@ -30,7 +30,7 @@ from optrack.geometry import invert
 from optrack.net.messages import DetectionsMessage
 from optrack.types import NetworkCalibration
 
-__all__ = ["RefinementReport", "board_rms_px", "refine_walk"]
+__all__ = ["RefinementReport", "board_rms_px", "refine_walk", "walk_trajectories"]
 
 
 @dataclasses.dataclass
@@ -79,7 +79,7 @@ def board_rms_px(
     return {s: float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for s, e in errors.items()}
 
 
-def _trajectories(
+def walk_trajectories(
     base: NetworkCalibration, batches: Mapping[str, Sequence[DetectionsMessage]]
 ) -> dict[str, Trajectory]:
     """Each calibrated sensor's detections of the walker, in the world of ``base``."""
@@ -107,7 +107,7 @@ def refine_walk(
     sensor's checkerboard reprojection RMS with those poses (:func:`board_rms_px`); a
     correction is refused when it grows that RMS by more than the fraction ``growth``."""
     progress(0.05, "collecting the walker's trajectories")
-    trajectories = _trajectories(base, batches)
+    trajectories = walk_trajectories(base, batches)
     progress(0.2, f"Algorithm 1 over {len(trajectories)} sensors")
     p = REFINEMENT_PARAMS.create()
     result = refine_from_trajectories(trajectories, p)

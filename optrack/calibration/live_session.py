@@ -42,7 +42,12 @@ from optrack.calibration.live import (
     Progress,
     SensorLive,
 )
-from optrack.calibration.live_refine import RefinementReport, board_rms_px, refine_walk
+from optrack.calibration.live_refine import (
+    RefinementReport,
+    board_rms_px,
+    refine_walk,
+    walk_trajectories,
+)
 from optrack.calibration.network import (
     FLOOR_KEY,
     NETWORK_PARAMS,
@@ -335,6 +340,7 @@ class LiveSession:
                 ),
                 floor_views=feedback.floor_views if feedback is not None else 0,
                 refinement_samples=self._samples(),
+                walk=self._walk(),
                 message=self._advice(feedback),
                 elapsed_s=now - self._phase_started if self.phase != "idle" else 0.0,
                 instants=self._instants,
@@ -374,6 +380,13 @@ class LiveSession:
             capture_hz=st.capture_hz(now),
             parent=status.parent if status is not None else None,
         )
+
+    def _walk(self) -> dict[str, np.ndarray]:
+        """The walker's positions so far per sensor, in the solved world (refinement)."""
+        if self.phase != "refinement" or self.solved is None:
+            return {}
+        trajectories = walk_trajectories(self.solved, self._detections)
+        return {sid: trajectory.xyz for sid, trajectory in trajectories.items()}
 
     def _samples(self) -> dict[str, int]:
         """Detections of the walker collected per sensor (frames with someone in them)."""

@@ -208,6 +208,40 @@ def test_refinement_page_plots_trajectories_before_and_after_and_the_error_figur
     assert wizard.refined and wizard.calibration is report.calibration
 
 
+def test_a_page_is_busy_until_every_job_it_asked_for_has_ended(qtbot, wizard):
+    """Solve right after a floor capture queues two jobs, stop and solve: the page said it
+    was done when the stop ended, before the solve had said anything (six sensors)."""
+    import threading
+    from types import SimpleNamespace
+
+    page = wizard.floor_page
+    wizard.live = SimpleNamespace()  # a session is open; these jobs do not use it
+    gate, ended = threading.Event(), []
+    page.run("first", lambda progress: "first", ended.append)
+    page.run("second", lambda progress: gate.wait(10) and "second", ended.append, "Solving…")
+    qtbot.waitUntil(lambda: ended == ["first"], timeout=5000)
+    assert page.busy and not page.solve_button.isEnabled()
+    assert not page.progress.isHidden()  # the solve's progress stays up
+    gate.set()
+    qtbot.waitUntil(lambda: ended == ["first", "second"], timeout=5000)
+    assert not page.busy and page.solve_button.isEnabled() and page.progress.isHidden()
+
+
+def test_refinement_page_draws_the_walk_while_the_person_walks(wizard):
+    """Issue 18 item 8: the plots were empty during the walk (only the counts changed)."""
+    page = wizard.refinement_page
+    t = np.linspace(0.0, np.pi, 15)
+    walk = np.column_stack([np.cos(t), np.sin(t), np.full_like(t, 1.1)])
+    walking = state("refinement", [], walk={"cam0": walk, "cam1": walk[:9] + 0.05})
+    walking.refinement_samples.update({"cam0": 15, "cam1": 9})
+    page.show_state(walking)
+    assert set(page.before.curves) == {"cam0", "cam1"}
+    x, y = page.before.curves["cam1"].getData()
+    np.testing.assert_allclose(y, walk[:9, 1] + 0.05)
+    assert page.after.isHidden()  # nothing refined yet: no empty after plot
+    assert page.samples.text() == "Detections of the walker: cam0 15, cam1 9."
+
+
 def test_review_page_shows_each_sensors_quality_from_the_calibration_file(wizard):
     from optrack.calibration.files import CalibrationFile, SensorEntry
 
