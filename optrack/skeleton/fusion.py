@@ -162,7 +162,21 @@ def world_points(
     if edge_jump > 0.0:
         depth = drop_edges(depth, edge_jump)
     points, _ = backproject_points(depth, intrinsics, stride)
-    return transform_points(world_T_camera, points)
+    return _to_world(world_T_camera, points)
+
+
+def _to_world(world_T_camera: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``world_T_camera`` applied to camera points (N, 3), float32, by columns: the
+    (N, 3) x (3, 3) product of :func:`~optrack.geometry.transform_points` goes to BLAS,
+    whose threads spin on a busy machine (2 to 60 ms of CPU for 100 000 points, measured
+    on a person's rectangle; this is about 1 ms)."""
+    pose = np.asarray(world_T_camera, dtype=np.float32)
+    points = np.asarray(points, dtype=np.float32)
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    out = np.empty((len(points), 3), dtype=np.float32)
+    for i in range(3):
+        out[:, i] = x * pose[i, 0] + y * pose[i, 1] + z * pose[i, 2] + pose[i, 3]
+    return out
 
 
 def person_roi(
