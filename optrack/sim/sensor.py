@@ -16,7 +16,8 @@ URI: ``sim://SCENARIO/N?seed=0&people=5&sensors=3&model=kinect1&seconds=60
 &realtime=false&noise=false&start=1700000000.0&id=cam0&hold=5&loop=true`` (all optional;
 ``hold``: seconds the board operator holds the board still at each place; ``loop``: at
 the end of ``seconds`` the venue starts again from its beginning, on every sensor that
-shares ``start`` at the same instant);
+shares ``start`` at the same instant, and each loop ends as it began: people walk back
+to where they started, :mod:`optrack.sim.venue_loop`);
 ``sim:///abs/path/scenario.yaml/N`` for a scenario file. Importing this module
 registers the scheme with :func:`optrack.sensors.uri.register_scheme`, so that
 :func:`optrack.sensors.open_sensor` opens ``sim://`` URIs from then on.
@@ -168,6 +169,11 @@ class SimulatedSensor(Sensor):
             seconds=seconds,
             params=_operator_params(hold_seconds),
         )
+        if loop:  # each loop ends as it began (optrack.sim.venue_loop): no jump
+            from optrack.sim.venue_loop import close_loop
+
+            make = self._make
+            self._make = lambda: close_loop(make())
         self.simulation = self._make()
         if loop and not real_time:
             raise SensorError("a simulated sensor loops in real time only (realtime=true).")
