@@ -21,6 +21,7 @@ from app.folders import calibrations_folder, recordings_folder, start_in
 from app.help_menu import add_help_menu
 from app.source import NO_SITE, SiteSource, node_schemas
 from app.view_params import VIEW_PARAMS
+from app.widgets.insecure_warning import InsecureWarning
 from app.widgets.log_panel import LogPanel, QtLogHandler
 from app.widgets.outputs_panel import OutputsPanel
 from app.widgets.parameters_panel import ParametersPanel
@@ -62,6 +63,8 @@ class MainWindow(QMainWindow):
         self.statusBar().addWidget(self.site_label)
         self.progress_label = QLabel("")
         self.statusBar().addPermanentWidget(self.progress_label)
+        self.insecure_warning = InsecureWarning(self)  # while the site runs without keys
+        self.statusBar().addPermanentWidget(self.insecure_warning)
         self._menus()
         self._connect_panels()
 
