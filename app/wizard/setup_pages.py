@@ -18,6 +18,7 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
 )
 
+from app.folders import calibrations_folder, start_in
 from app.wizard.jobs import action_button
 from app.wizard.page import DONE_STYLE, WizardPage
 from app.wizard.widgets import ImageTile, SensorTable, count_level, views_text
@@ -156,7 +157,10 @@ class NetworkPage(WizardPage):
 
     def _ask_print(self) -> None:
         path, _ = QFileDialog.getSaveFileName(
-            self, "Save a printable board", "board.pdf", "PDF (*.pdf);;PNG image (*.png)"
+            self,
+            "Save a printable board",
+            start_in(calibrations_folder(), "board.pdf"),
+            "PDF (*.pdf);;PNG image (*.png)",
         )
         if path:
             self.print_board(path)

@@ -208,6 +208,30 @@ def test_refinement_page_plots_trajectories_before_and_after_and_the_error_figur
     assert wizard.refined and wizard.calibration is report.calibration
 
 
+def test_the_wizards_file_dialogs_start_in_the_users_calibrations_folder(
+    wizard, monkeypatch, tmp_path
+):
+    """Print a board…, Save… and Export… start in ~/optrack-calibrations, never in the
+    folder the program was started from (issue 18 item 3)."""
+    from PySide6.QtWidgets import QFileDialog
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    asked: list[str] = []
+
+    def file_dialog(parent, title, start, *rest):  # the operator cancels
+        asked.append(start)
+        return "", ""
+
+    monkeypatch.setattr(QFileDialog, "getSaveFileName", file_dialog)
+    folder = tmp_path / "optrack-calibrations"
+    wizard.network_page._ask_print()
+    assert asked[-1] == str(folder / "board.pdf")
+    wizard.review_page._ask_save()
+    assert asked[-1] == str(folder / "calibration.yaml")
+    wizard.review_page._ask_export()
+    assert asked[-1] == str(folder / "camera_poses.yaml")
+
+
 def test_a_page_is_busy_until_every_job_it_asked_for_has_ended(qtbot, wizard):
     """Solve right after a floor capture queues two jobs, stop and solve: the page said it
     was done when the stop ended, before the solve had said anything (six sensors)."""
@@ -320,6 +344,33 @@ def test_a_refinement_that_changed_nothing_says_so_and_shows_no_after_plot(wizar
     assert page.after.isHidden()
 
 
+def sides(corners):
+    """The middle of each side of a board's outline (x, y)."""
+    return [(corners[k, :2] + corners[(k + 1) % len(corners), :2]) / 2 for k in range(4)]
+
+
+def green_at(view, point, reach: int = 3) -> bool:
+    """Whether the Top view paints the guidance's green within ``reach`` pixels of the
+    world point (x, y)."""
+    from PySide6.QtCore import QPointF
+
+    from app.widgets.top_view import GUIDANCE_COLOR
+
+    view.resize(600, 600)
+    view.setRange(xRange=(-3, 3), yRange=(-3, 3), padding=0)
+    image = view.grab().toImage()
+    scene = view.plotItem.vb.mapViewToScene(QPointF(float(point[0]), float(point[1])))
+    at = view.mapFromScene(scene)
+    ratio = image.devicePixelRatio()
+    for du in range(-reach, reach + 1):
+        for dv in range(-reach, reach + 1):
+            colour = image.pixelColor(round((at.x() + du) * ratio), round((at.y() + dv) * ratio))
+            rgb = np.array([colour.red(), colour.green(), colour.blue()])
+            if np.abs(rgb - np.array(GUIDANCE_COLOR)).sum() < 60:
+                return True
+    return False
+
+
 def test_the_extrinsics_page_says_where_to_hold_the_board_and_the_top_view_shows_it(qtbot):
     """The backend's guidance (optrack.runtime.calibration_guidance, real geometry): the
     page says it in a sentence, the main window's Top view draws the region and the board
@@ -348,8 +399,12 @@ def test_the_extrinsics_page_says_where_to_hold_the_board_and_the_top_view_shows
     assert "facing cam1 and cam0" in page.message.text()
     region, board, label = window.top_view.guidance_items
     assert len(region.data) == len(advised.guidance.region) > 0
-    assert np.allclose(board.getData()[0][:4], advised.guidance.corners[:, 0])  # closed
+    x, y = board.getData()
+    assert np.allclose(x[:4], advised.guidance.corners[:, 0])
+    assert len(x) == 5 and (x[4], y[4]) == (x[0], y[0])  # closed
     assert label.textItem.toPlainText() == "board for cam1"
+    # Drawn closed, as the screenshot shows it: the middle of every side is green.
+    assert all(green_at(window.top_view, side) for side in sides(advised.guidance.corners))
     page.cleanupPage()  # Back: the views forget it
     assert window.top_view.guidance_items == []
     window.close()
