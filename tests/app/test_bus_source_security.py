@@ -20,12 +20,11 @@ LINKS = {"multicast_scouting": False, "gossip": False}
 
 @pytest.fixture
 def window(qtbot):
+    """The operator's window (not shown: its status bar's widgets are what is looked at)."""
     from app.main_window import MainWindow
 
     window = MainWindow()
     qtbot.addWidget(window)
-    window.show()
-    qtbot.waitExposed(window)
     yield window
     window.source.close()
 

@@ -5,6 +5,7 @@ The site tests (test_site.py, test_skeleton_site.py) start theirs from here."""
 from __future__ import annotations
 
 import json
+import subprocess
 import threading
 import time
 from pathlib import Path
@@ -16,10 +17,45 @@ from pythonosc.osc_server import ThreadingOSCUDPServer
 
 from optrack.bench.site_process import DatagramReceiver
 from optrack.net.bus import Bus
+from optrack.net.clock import ClockServer
 from optrack.net.config import BUS_PARAMS
 from optrack.net.messages import StatusMessage
 
 from .conftest import Processes, free_port
+
+
+def recording_detector(
+    venue: Path, hub: Bus, client: Bus, processes: Processes, folder: Path, data_folder: Path
+) -> tuple[subprocess.Popen[bytes], list[StatusMessage]]:
+    """A detector node (`optrack node detect`, its own process; its configuration and
+    state in ``folder``) playing sensor kinect2_0 of ``venue`` in a loop on ``hub``'s site
+    'test' (which answers the clock), recording only inside ``data_folder``, its status 5
+    times a second; returns it once its first status reached ``client``, and the list its
+    statuses keep arriving in."""
+    ClockServer(hub)
+    config = folder / "node.yaml"
+    endpoint = f"tcp/127.0.0.1:{int(client.params.local_port)}"
+    node = {"state_dir": str(folder / "state"), "status_period_s": 0.2}
+    bus = {"mode": "client", "connect": endpoint, "multicast_scouting": False}
+    config.write_text(
+        yaml.safe_dump({"bus": bus, "node": {**node, "data_folder": str(data_folder)}})
+    )
+    statuses: list[StatusMessage] = []
+    client.subscribe(
+        client.keys.status("kinect2_0"), StatusMessage, lambda m, k: statuses.append(m)
+    )
+    sensor = f"file://{venue}?loop=restart#kinect2_0"
+    process = processes.start(
+        ["optrack.cli", "node", "detect", "--sensor", sensor, "--site", "test"]
+        + ["--config", str(config)],
+        "node",
+    )
+    deadline = time.monotonic() + 120
+    while not statuses:
+        assert process.poll() is None, processes.output(process)[-3000:]
+        assert time.monotonic() < deadline, processes.output(process)[-3000:]
+        time.sleep(0.05)
+    return process, statuses
 
 
 def venue_sensors(venue: Path, sensors: tuple[str, ...]) -> str:

@@ -17,7 +17,6 @@ from websockets.sync.client import connect
 
 from optrack.cli import main
 from optrack.net.bus import Bus
-from optrack.net.clock import ClockServer
 from optrack.net.config import BUS_PARAMS
 from optrack.net.messages import DetectionsMessage, StatusMessage
 from optrack.outputs import OUTPUTS_PARAMS, Outputs
@@ -33,6 +32,7 @@ from optrack.types import (
     as_matrix4,
 )
 from tests.runtime.conftest import free_port
+from tests.runtime.sites import recording_detector
 
 
 def node_config(tmp_path, bus: dict, outputs: dict | None = None, **node) -> str:
@@ -54,28 +54,11 @@ def wait_until(condition, timeout=60.0):
 
 
 def test_a_record_start_outside_the_sites_data_folder_is_refused_and_counted(
-    venue, hub, bus_params, make_client, processes, tmp_path
+    venue, hub, make_client, processes, tmp_path
 ):
-    ClockServer(hub)
     data = tmp_path / "data"
-    endpoint = f"tcp/127.0.0.1:{int(bus_params.local_port)}"
-    config = node_config(
-        tmp_path,
-        {"mode": "client", "connect": endpoint, "multicast_scouting": False},
-        data_folder=str(data),
-    )
-    statuses: list[StatusMessage] = []
     client = make_client("operator")
-    client.subscribe(
-        client.keys.status("kinect2_0"), StatusMessage, lambda m, k: statuses.append(m)
-    )
-    sensor = f"file://{venue}?loop=restart#kinect2_0"
-    processes.start(
-        ["optrack.cli", "node", "detect", "--sensor", sensor, "--site", "test"]
-        + ["--config", config],
-        "node",
-    )
-    wait_until(lambda: statuses, 120)
+    _, statuses = recording_detector(venue, hub, client, processes, tmp_path, data)
     for folder in (tmp_path / "elsewhere", data / ".." / "escaped"):
         with pytest.raises(CommandError, match="records only inside the site's data folder"):
             send_command(client, "kinect2_0", "record_start", {"folder": str(folder)}, timeout=10)
@@ -139,6 +122,20 @@ def peer_config(tmp_path, port: int):
     return node_config(tmp_path, {"mode": "peer", **links}, outputs={"udp": ""})
 
 
+def insecure_observer(port: int) -> tuple[Bus, list[StatusMessage]]:
+    """A peer without keys joined to the insecure site 'lab' on loopback ``port``, and the
+    list every status it hears arrives in."""
+    statuses: list[StatusMessage] = []
+    links = {"connect": f"tcp/127.0.0.1:{port}", "multicast_scouting": False, "gossip": False}
+    client = Bus(
+        "lab",
+        "observer",
+        BUS_PARAMS.create({"mode": "peer", **links, "insecure": True, "connect_timeout_s": 60.0}),
+    )
+    client.subscribe(client.keys.status(), StatusMessage, lambda m, k: statuses.append(m))
+    return client, statuses
+
+
 def test_peer_mode_without_keys_refuses_to_start_and_insecure_says_so_in_every_status(
     tmp_path, capsys, processes
 ):
@@ -154,22 +151,8 @@ def test_peer_mode_without_keys_refuses_to_start_and_insecure_says_so_in_every_s
         ["optrack.cli", "node", "track", "--site", "lab", "--config", config, "--insecure"],
         "tracker",
     )
-    statuses: list[StatusMessage] = []
-    client = Bus(
-        "lab",
-        "observer",
-        BUS_PARAMS.create(
-            {
-                "mode": "peer",
-                "connect": f"tcp/127.0.0.1:{port}",
-                "multicast_scouting": False,
-                "gossip": False,
-                "insecure": True,
-            }
-        ),
-    )
+    client, statuses = insecure_observer(port)
     try:
-        client.subscribe(client.keys.status(), StatusMessage, lambda m, k: statuses.append(m))
         wait_until(
             lambda: {"tracker", "outputs"} <= {s.node for s in statuses} or node.poll() is not None,
             60,
@@ -202,31 +185,15 @@ def test_an_insecure_peer_site_runs_its_nodes_on_the_hubs_transport_and_says_so(
     launcher = processes.start(
         ["optrack.cli", "run", "--headless", "--insecure", "--config", str(config)], "launcher"
     )
-    statuses: dict[str, StatusMessage] = {}
-    client = Bus(
-        "lab",
-        "observer",
-        BUS_PARAMS.create(
-            {
-                "mode": "peer",
-                "connect": f"tcp/127.0.0.1:{port}",
-                "multicast_scouting": False,
-                "gossip": False,
-                "insecure": True,
-                "connect_timeout_s": 60.0,
-            }
-        ),
-    )
+    client, statuses = insecure_observer(port)
     try:
-        client.subscribe(
-            client.keys.status(), StatusMessage, lambda m, k: statuses.__setitem__(m.node, m)
-        )
         nodes = {"site", "tracker", "outputs", "kinect2_0"}
-        wait_until(lambda: nodes <= set(statuses) or launcher.poll() is not None, 120)
-        assert nodes <= set(statuses), processes.output(launcher)[-3000:]
-        assert all(statuses[node].values.get("insecure") is True for node in nodes)
-        assert statuses["site"].values["restarts.tracker"] == 0
-        assert statuses["site"].values["restarts.kinect2_0"] == 0
+        heard = lambda: {s.node for s in statuses}  # noqa: E731
+        wait_until(lambda: nodes <= heard() or launcher.poll() is not None, 120)
+        assert nodes <= heard(), processes.output(launcher)[-3000:]
+        assert all(s.values.get("insecure") is True for s in statuses)
+        site = [s for s in statuses if s.node == "site"][-1]
+        assert site.values["restarts.tracker"] == site.values["restarts.kinect2_0"] == 0
     finally:
         client.close()
 

@@ -11,12 +11,11 @@ import time
 import yaml
 
 from optrack.cli import main
-from optrack.net.clock import ClockServer
-from optrack.net.messages import StatusMessage
 from optrack.recording import Recording
 from optrack.runtime.node import send_command
 
 from .conftest import free_port
+from .sites import recording_detector
 
 
 def test_optrack_run_plays_a_recording_on_every_sensor_and_stops_at_its_end(
@@ -52,37 +51,11 @@ def test_a_playback_speed_out_of_range_is_one_sentence(tmp_path, capsys):
 
 
 def test_a_node_killed_while_recording_leaves_every_frame_it_wrote_readable(
-    venue, hub, bus_params, make_client, processes, tmp_path
+    venue, hub, make_client, processes, tmp_path
 ):
-    ClockServer(hub)
-    config = tmp_path / "node.yaml"
-    endpoint = f"tcp/127.0.0.1:{int(bus_params.local_port)}"
-    config.write_text(
-        yaml.safe_dump(
-            {
-                "bus": {"mode": "client", "connect": endpoint, "multicast_scouting": False},
-                "node": {
-                    "state_dir": str(tmp_path / "state"),
-                    "status_period_s": 0.2,
-                    "data_folder": str(tmp_path),
-                },
-            }
-        )
-    )
-    statuses: list[StatusMessage] = []
     client = make_client("observer")
-    client.subscribe(
-        client.keys.status("kinect2_0"), StatusMessage, lambda m, k: statuses.append(m)
-    )
-    sensor = f"file://{venue}?loop=restart#kinect2_0"
-    node = processes.start(
-        ["optrack.cli", "node", "detect", "--sensor", sensor, "--site", "test"]
-        + ["--config", str(config)],
-        "node",
-    )
+    node, statuses = recording_detector(venue, hub, client, processes, tmp_path, tmp_path)
     deadline = time.monotonic() + 120
-    while not statuses and time.monotonic() < deadline:
-        time.sleep(0.1)
     take = tmp_path / "take"
     send_command(client, "kinect2_0", "record_start", {"folder": str(take)}, timeout=10)
     while time.monotonic() < deadline:
