@@ -136,15 +136,6 @@ OPERATOR_PARAMS = register(
                 unit="s",
                 help="How long the operator waits for a detector node to take its scene.",
             ),
-            Param(
-                "skip_step_s",
-                0.1,
-                min=0.01,
-                max=1.0,
-                unit="s",
-                help="Time step used to find when the operator starts for the floor "
-                "(lay_board skips the held placements).",
-            ),
         ],
         help="The simulated operator of a simulated site (calibration wizard).",
     )
@@ -287,10 +278,11 @@ class SimulatedOperator:
     ) -> SimulatedOperator | None:
         """The site's simulated operator, or None when a sensor is not simulated."""
         if not str(site_params.sensors).strip():  # the embedded venue
-            from optrack.sim.world import Simulation
+            from optrack.sim.scenario import load_scenario
 
-            venue = Simulation(str(site_params.scenario), seed=int(site_params.seed), people=0)
-            ids = {sensor.id: k for k, sensor in enumerate(venue.sensors)}
+            # its sensors' ids, without loading the renderer before the nodes start
+            venue = load_scenario(str(site_params.scenario)).sensors.sensor_ids()
+            ids = {sensor_id: k for k, sensor_id in enumerate(venue)}
             if any(name not in ids for name in names):
                 return None
             indices = [ids[name] for name in names]
@@ -461,6 +453,8 @@ class SimulatedOperator:
         else:
             assert board is not None
             people = PeopleSpec(count=0)
+            # Only the placements the page needs: the operator starts at the first of them.
+            steps = "floor" if action == "lay_board" else "pairs" if order.pairs else "all"
             spec = BoardSpec(
                 cols=board.cols,
                 rows=board.rows,
@@ -468,6 +462,7 @@ class SimulatedOperator:
                 floor_placements=order.places if action == "lay_board" else 0,
                 intrinsics_sensor=order.shown,
                 intrinsics_placements=int(p.intrinsics_places),
+                steps=steps,
             )
         derived = msgspec.structs.replace(
             self.base,
@@ -481,12 +476,9 @@ class SimulatedOperator:
         path = self.run_dir / f"{order.scene}.yaml"
         # whole or not at all: detector nodes load the scene as soon as the file appears
         atomic_write_text(path, yaml.safe_dump(data, sort_keys=False))
-        skip = 0.0
-        if action == "lay_board":
-            skip = self._skip_to(path, lambda step: step.kind == "floor")
-        elif action == "move_board" and order.pairs:
-            skip = self._skip_to(path, lambda step: len(step.sensors) > 1)
-        start = time.time() + float(p.lead_s) - skip
+        if action in ("move_board", "lay_board"):
+            self._check_steps(path)
+        start = time.time() + float(p.lead_s)
         extra = "".join(f"&{k}={urllib.parse.quote(v)}" for k, v in sorted(self.options.items()))
         if spec is not None:
             hold = float(p.intrinsics_hold_s if action == "show_board" else p.hold_s)
@@ -496,11 +488,9 @@ class SimulatedOperator:
             for name, index in self.sensors
         ]
 
-    def _skip_to(self, path: Path, wanted: Callable[[Any], bool]) -> float:
-        """Simulated seconds until the operator heads for the first placement ``wanted``
-        (the placements before it are skipped: the held ones for the floor, those facing
-        one sensor for the extrinsics)."""
-        from optrack.sim.board import BOARD_PARAMS
+    def _check_steps(self, path: Path) -> None:
+        """Refuse a scene whose operator has no placement to make (the board is seen by no
+        two sensors together, or nowhere on the floor)."""
         from optrack.sim.world import Simulation
 
         sensors = self.options.get("sensors")
@@ -509,19 +499,9 @@ class SimulatedOperator:
             seed=self.seed,
             sensors=int(sensors) if sensors else None,
             sensor_model=self.options.get("model") or None,
-            params={"sim_board": BOARD_PARAMS.create({"hold_seconds": float(self.params.hold_s)})},
         )
-        operator = sim.operator
-        if operator is None:
-            return 0.0
-        first = next((k for k, step in enumerate(operator.steps) if wanted(step)), None)
-        if first is None:
+        if sim.operator is None or not sim.operator.steps:
             raise OperatorError(
                 "the simulated operator found no place for the board that the sensors see "
                 "(together, or on the floor); use a larger board or check the sensors' views."
             )
-        t, step = 0.0, float(self.params.skip_step_s)
-        while operator.index < first and t < sim.seconds:
-            t += step
-            sim.crowd.advance(t)
-        return t

@@ -29,7 +29,7 @@ import math
 import time
 import urllib.parse
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import msgspec
 
@@ -38,10 +38,11 @@ from optrack.params import Params
 from optrack.recording.format import GroundTruth, SensorInfo
 from optrack.sensors.base import Sensor, SensorError
 from optrack.sensors.uri import SensorURI, register_scheme
-from optrack.sim.board import BOARD_PARAMS
 from optrack.sim.scenario import Scenario, load_scenario
-from optrack.sim.world import Simulation, WorldState
 from optrack.types import RGBDFrame
+
+if TYPE_CHECKING:  # the renderer (Open3D) loads with the first sensor, not with the scheme
+    from optrack.sim.world import WorldState
 
 __all__ = ["SimulatedSensor"]
 
@@ -54,6 +55,8 @@ def _operator_params(hold_seconds: float | None) -> dict | None:
     place (sim_board.hold_seconds); None keeps the default."""
     if hold_seconds is None:
         return None
+    from optrack.sim.board import BOARD_PARAMS
+
     return {"sim_board": BOARD_PARAMS.create({"hold_seconds": hold_seconds})}
 
 
@@ -160,6 +163,8 @@ class SimulatedSensor(Sensor):
         clock: object = time,
         loop: bool = False,
     ) -> None:
+        from optrack.sim.world import Simulation
+
         self._make = lambda: Simulation(
             scenario,
             seed=seed,

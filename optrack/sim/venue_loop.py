@@ -43,7 +43,7 @@ __all__ = ["LOOP_CLOSE", "ClosingLoop", "close_loop", "loop_seam"]
 LOOP_CLOSE = {
     "return_s": 30.0,
     "return_share": 0.25,
-    "settle_s": 6.0,
+    "settle_s": 8.0,
     "settle_share": 0.05,
     "sway_period_s": 4.0,
 }

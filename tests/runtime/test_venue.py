@@ -10,6 +10,7 @@ from optrack.runtime.config import load_node_config
 from optrack.runtime.site import Site
 from optrack.runtime.venue import LIVE_LOOP_S, venue_uris
 from optrack.sim.sensor import SimulatedSensor
+from optrack.sim.venue_loop import LOOP_CLOSE
 
 
 def test_the_site_without_sensors_plays_the_live_venue_at_once(tmp_path, monkeypatch, capfd):
@@ -26,6 +27,7 @@ def test_the_site_without_sensors_plays_the_live_venue_at_once(tmp_path, monkeyp
     assert [q["id"] for q in queries] == ["kinect2_0", "kinect2_1", "kinect2_2"]
     assert len({q["start"] for q in queries}) == 1  # one clock for every sensor
     assert all(q["loop"] == "true" and float(q["seconds"]) == LIVE_LOOP_S for q in queries)
+    assert LIVE_LOOP_S % LOOP_CLOSE["sway_period_s"] == 0  # a standing person's sway goes on
 
 
 def test_the_venue_uris_open_as_live_sensors_of_one_venue() -> None:
