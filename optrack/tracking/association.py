@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
+from scipy.stats import chi2
 
 from optrack.tracking.motion import DIM_Z
 from optrack.types import Detection
@@ -72,8 +73,6 @@ UNMEASURED_VARIANCE = 1.0e6
 
 def gate_value(probability: float, dof: int = DIM_Z) -> float:
     """Squared Mahalanobis distance inside which ``probability`` of true detections fall."""
-    from scipy.stats import chi2  # here: scipy.stats costs every node 0.6 s CPU at start
-
     return float(chi2.ppf(probability, dof))
 
 
