@@ -227,3 +227,39 @@ def test_the_websocket_outputs_origins_and_token_are_output_parameters():
         assert status.kind == "websocket"
     finally:
         outputs.close()
+
+
+def test_the_nodes_and_window_of_an_insecure_peer_launcher_join_its_hub_without_keys(tmp_path):
+    """What `optrack run --insecure` in peer mode writes for what it starts: every node and
+    the window join its loopback hub as clients without TLS (the window presenting the
+    file's bus.identity), and its own status says insecure."""
+    from optrack.runtime.config import load_node_config
+    from optrack.runtime.site import Site
+
+    port = free_port()
+    bus = {"mode": "peer", "listen": f"tcp/127.0.0.1:{port}", "local_port": port}
+    bus |= {"multicast_scouting": False, "insecure": True, "identity": "op1"}
+    site = Site(load_node_config(None, {"bus": bus, "site": {"name": "lab"}}), headless=False)
+    site.host()
+    try:
+        configs = site._write_configs(tmp_path)
+        joined = {role: yaml.safe_load(path.read_text())["bus"] for role, path in configs.items()}
+        assert set(joined) == {"detector", "tracker", "skeleton", "gui"}
+        for role, values in joined.items():
+            assert values["mode"] == "client" and values["insecure"] is True, role
+            assert values["connect"] == f"tcp/127.0.0.1:{port}" and not values["listen"], role
+            assert values.get("identity") == ("op1" if role == "gui" else None), role
+        assert site.status().values["insecure"] is True
+    finally:
+        site.hub.close()
+    # A local site is never insecure: its nodes present this user's keys whatever the file.
+    local = {"local_port": free_port(), "insecure": True}
+    site = Site(load_node_config(None, {"bus": local, "site": {"name": "lab"}}), headless=False)
+    site.host()
+    try:
+        configs = site._write_configs(tmp_path)
+        assert "gui" not in configs  # the window reads the user's file, as before
+        assert yaml.safe_load(configs["detector"].read_text())["bus"]["insecure"] is False
+        assert "insecure" not in site.status().values
+    finally:
+        site.hub.close()
