@@ -10,8 +10,8 @@ without anyone jumping, :func:`close_loop` makes the venue end as it began:
   steers them round furniture and each other) and turns to the way they faced then;
 - they arrive before the last ``settle_s`` seconds and stand there, so that their walk
   fades out (gait amplitude to rest), as it was at the start;
-- whoever came in later (enter and leave) leaves through their door before the return
-  begins;
+- whoever came in later (enter and leave) heads for their door at the latest 5 % of
+  the loop before the return begins, and is gone by its end;
 - a loop's length is a multiple of ``sway_period_s``, the period of a standing person's
   sway, so the sway goes on through the loop's end too.
 
