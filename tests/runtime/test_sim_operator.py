@@ -56,7 +56,11 @@ def test_the_simulated_operator_moves_every_node_into_a_scene_of_the_same_sensor
             assert sensor.info.id == f"cam{k}"
             assert np.allclose(sensor.info.world_T_camera, truth[k].world_T_camera)
             assert sensor.simulation.scenario.people.count == 0
-            assert [s.kind for s in sensor.simulation.operator.steps].count("floor") == 3
+            # Only the floor placements, the operator starting at the first: no held ones
+            # to walk through (or to simulate) before the floor page sees the board.
+            steps = sensor.simulation.operator.steps
+            assert [s.kind for s in steps] == ["floor"] * 3
+            assert np.allclose(sensor.simulation.operator.start_point, steps[0].operator_spot)
             assert sensor.simulation.operator.params.hold_seconds == 5.0
         assert operator.status_values()["operator"] == "lay_board"
         send_command(client, "site", "operator", {"action": "people"})
@@ -148,6 +152,23 @@ def test_the_simulated_operator_carries_the_sites_board_and_needs_one(tmp_path):
         time.sleep(0.05)
     board = yaml.safe_load(scene.read_text())["board"]
     assert (board["cols"], board["rows"], board["square"]) == (8, 5, 0.15)
+
+
+def test_the_extrinsics_scene_holds_the_board_only_where_two_sensors_see_it(tmp_path):
+    """move_board with pairs (the extrinsics page): the scene's operator starts at the first
+    place two sensors share and holds the board only at such places."""
+    uris = [f"sim://calibration/{k}?sensors=3&id=cam{k}" for k in range(3)]
+    site = SITE_PARAMS.create({"sensors": ",".join(uris)})
+    operator = SimulatedOperator.for_site(site, uris, ["cam0", "cam1", "cam2"], tmp_path)
+    reply = operator.command({"action": "move_board", "pairs": True, **BOARD})
+    scene = tmp_path / f"{reply['scene']}.yaml"
+    deadline = time.monotonic() + 30
+    while not scene.is_file() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    simulation = Simulation(str(scene), sensors=3)
+    steps = simulation.operator.steps
+    assert steps and all(s.kind == "hold" and len(s.sensors) == 2 for s in steps)
+    assert np.allclose(simulation.operator.start_point, steps[0].operator_spot)
 
 
 def _site_config(folder, name: str, sensors: str) -> str:
