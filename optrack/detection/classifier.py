@@ -121,9 +121,10 @@ def person_window(
     origin: tuple[int, int] = (0, 0),
     stride: int = 1,
     mirror: bool = False,
+    outside: int = 0,
 ) -> np.ndarray:
-    """The 64x128 window, sampled bilinearly from ``image``, black outside it (``mirror``:
-    the image mirrored at its borders outside it).
+    """The 64x128 window, sampled bilinearly from ``image``, ``outside`` (black) outside
+    it (``mirror``: the image mirrored at its borders outside it).
 
     ``image`` may be a strided crop of the full image whose pixel (0, 0) is the
     full image's ``origin`` (u, v) and whose pixels are ``stride`` apart.
@@ -140,7 +141,7 @@ def person_window(
         HOG_WINDOW,
         flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
         borderMode=cv2.BORDER_REFLECT if mirror else cv2.BORDER_CONSTANT,
-        borderValue=0,
+        borderValue=outside,
     )
 
 

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from optrack.params import Params
     from optrack.types import DetectionBatch, Intrinsics, RGBDFrame
 
-__all__ = ["DetectError", "add_commands", "cmd_detect"]
+__all__ = ["DetectError", "add_commands", "cmd_detect", "cmd_train_depth_classifier"]
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".pgm", ".exr")
 
@@ -413,4 +413,52 @@ def add_commands(commands: Any, command: Any) -> None:
         type=positive_number,
         help="depth image: metres per unit (default 0.001: millimetres)",
     )
+    add_json(p)
+    _add_train(commands, command)
+
+
+def cmd_train_depth_classifier(args: argparse.Namespace) -> int:
+    """``optrack train depth-classifier``: train the depth-only person classifier on
+    simulated scenes and write it; the report has its held-out scores."""
+    from optrack.cli import emit_json
+    from optrack.sim.depth_training import split_parts, train_depth_classifier
+
+    seeds = list(range(args.first_seed, args.first_seed + args.scenes))
+    split_parts(len(seeds))  # refuses too few scenes before any is simulated
+    out = Path(args.out)
+    if not out.parent.is_dir():
+        raise UserError(f"--out: folder {out.parent} does not exist.")
+    model, report = train_depth_classifier(seeds, args.seconds, args.every, progress=_info)
+    model.save(out)
+    report["out"] = str(out)
+    if args.json:
+        emit_json(report)
+    else:
+        test = report["test"]
+        print(
+            f"{out}: held-out recall {test['recall']:.3f}, precision {test['precision']:.3f} "
+            f"at threshold {report['threshold']:.2f} ({test['windows']} windows)"
+        )
+    return 0
+
+
+def _add_train(commands: Any, command: Any) -> None:
+    """``optrack train STEP``: models trained here."""
+    from optrack.cli import add_group, add_json
+    from optrack.io.arguments import count, positive_number
+
+    train = add_group(commands, "train", "Train the detector's models.", "train_command", "STEP")
+    p = command(
+        "depth-classifier",
+        "Train the depth-only person classifier on simulated scenes.",
+        "optrack.detection.cli:cmd_train_depth_classifier",
+        train,
+    )
+    p.add_argument("--out", required=True, help="model file to write (.npz)")
+    p.add_argument("--scenes", type=count, default=40, help="simulated scenes (default 40)")
+    p.add_argument("--first-seed", type=int, default=1000, help="the first scene's seed")
+    p.add_argument(
+        "--seconds", type=positive_number, default=6.0, help="each scene's length (default 6)"
+    )
+    p.add_argument("--every", type=count, default=4, help="detect every Nth frame (default 4)")
     add_json(p)

@@ -340,8 +340,31 @@ DETECTION_PARAMS = register(
                 min=-10.0,
                 max=10.0,
                 step=0.05,
-                help="Depth-only judgement (dark frames, no image): keep candidates whose "
-                "silhouette HOG score is above this.",
+                help="Depth-only judgement with depth_classifier hog: keep candidates whose "
+                "silhouette HOG score (OpenCV's people detector) is above this.",
+            ),
+            Param(
+                "depth_classifier",
+                "trained",
+                choices=("trained", "hog"),
+                help="Depth-only judgement (dark frames, depth-only sensors): trained, the "
+                "depth classifier trained on simulated depth (optrack train "
+                "depth-classifier); hog, OpenCV's colour people detector on the silhouette.",
+            ),
+            Param(
+                "min_depth_model_confidence",
+                0.0,
+                min=-20.0,
+                max=20.0,
+                step=0.1,
+                help="Depth-only judgement with depth_classifier trained: keep candidates whose "
+                "log-odds of being a person are above this.",
+            ),
+            Param(
+                "depth_model",
+                "",
+                help="The trained depth classifier's file (optrack train depth-classifier "
+                "--out); empty: the one shipped with optrack.",
             ),
             Param(
                 "hog_window_fill",

@@ -8,8 +8,8 @@ One :class:`PeopleDetector` per sensor composes the stages (Munaro et al.
           -> floor removal, floor refit (unless locked) -> voxel grid
           -> [background subtraction] -> ground frame -> Euclidean clusters
           -> head-based sub-clusters -> height / width / head checks
-          -> HOG confidence (colour, infrared, or the depth silhouette when
-             dark) -> DetectionBatch
+          -> HOG confidence (colour, infrared, or the trained depth classifier
+             when dark) -> DetectionBatch
 
 Positions are in the world frame when the sensor's ``world_T_camera`` is
 known (``frame_id = "world"``), else in the sensor's ground frame
@@ -38,6 +38,11 @@ from optrack.detection.classifier import (
     window_footprint,
 )
 from optrack.detection.clustering import Candidate, TallColumns, person_candidates
+from optrack.detection.depth_classifier import (
+    DepthClassifier,
+    default_depth_classifier,
+    relative_depth,
+)
 from optrack.detection.edge import border_window, corrected_head, lateral_cut
 from optrack.detection.flags import is_occluded, outside_fraction
 from optrack.detection.ground import (
@@ -111,6 +116,9 @@ class Judgement:
     source: str  # "color", "infrared" or "depth"
     accepted: bool
     detection: Detection
+    #: Judged on depth: its windows (silhouette, and relative depth for the trained
+    #: depth classifier), the full-body one first.
+    windows: list[tuple[np.ndarray, np.ndarray | None]] = dataclasses.field(default_factory=list)
 
 
 class PeopleDetector:
@@ -119,7 +127,8 @@ class PeopleDetector:
     ``ground`` fixes the floor (camera frame, a,b,c,d); without it the floor
     is estimated from the first usable frame (see
     :class:`~optrack.detection.ground.GroundEstimator`), combined with the
-    calibration's floor when ``world_T_camera`` is given.
+    calibration's floor when ``world_T_camera`` is given. ``depth_model`` is a
+    depth classifier to use instead of the file the ``depth_model`` parameter names.
     """
 
     def __init__(
@@ -130,6 +139,7 @@ class PeopleDetector:
         ground: Plane | Sequence[float] | None = None,
         world_T_camera: np.ndarray | None = None,
         ground_store: GroundStore | None = None,
+        depth_model: DepthClassifier | None = None,
     ) -> None:
         self.params = params if params is not None else detection_params()
         self.sensor_id = sensor_id
@@ -150,6 +160,8 @@ class PeopleDetector:
             float(self.params.background_resolution), float(self.params.background_seconds)
         )
         self.hog = HogClassifier()
+        #: The trained depth classifier, instead of the one ``depth_model`` names.
+        self.depth_model = depth_model
         self.last_judgements: list[Judgement] = []
         self.last_luminance: float | None = None
 
@@ -360,8 +372,13 @@ class PeopleDetector:
             center_c, height, to_depth, window_footprint(to_depth, cloud.shape),
             max(1, round(person_px / fill / CROP_ROWS)),
         )  # fmt: skip
-        score, crop = self._score(head, window, cloud, g_T_c, image, image_intrinsics, source)
-        threshold = p.min_depth_confidence if source == "depth" else p.min_confidence
+        score, crop, windows = self._score(
+            head, window, cloud, g_T_c, image, image_intrinsics, source
+        )
+        threshold = p.min_confidence
+        if source == "depth":
+            trained = p.depth_classifier == "trained"
+            threshold = p.min_depth_model_confidence if trained else p.min_depth_confidence
         accepted = score > float(threshold)
 
         # Flags and histogram, of accepted candidates only (the others are not output).
@@ -396,7 +413,7 @@ class PeopleDetector:
             histogram=histogram,
             **self._position(center_c, g_T_c),
         )
-        return Judgement(candidate, score, source, accepted, detection)
+        return Judgement(candidate, score, source, accepted, detection, windows)
 
     def _head(self, candidate: Candidate, c_T_g: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
         """Where the candidate stands (ground frame x, y): its head centroid, moved out for
@@ -429,11 +446,10 @@ class PeopleDetector:
         image: np.ndarray | None,
         image_intrinsics: Intrinsics,
         source: str,
-    ) -> tuple[float, _Crop | None]:
-        """The candidate's confidence (and its crop when the depth silhouette was used):
-        the HOG score of its full-body window; for a person cut by the image's left or
-        right border, the better of that and the score of the window on the border,
-        mirrored there (its visible part judged)."""
+    ) -> tuple[float, _Crop | None, list[tuple[np.ndarray, np.ndarray | None]]]:
+        """The candidate's confidence (and its crop and windows when judged on depth): the score of its full-body window; for a person cut by the
+        image's left or right border, the better of that and the score of the window on
+        the border, mirrored there (its visible part judged)."""
         p = self.params
         plane = self.ground.plane
         assert plane is not None
@@ -441,7 +457,7 @@ class PeopleDetector:
         center_c, height = window.center, window.height
         if source == "depth":
             crop = self._crop(head, height, cloud, g_T_c, window.footprint, window.stride)
-            windows = [self._silhouette(crop, window.to_image, window, False)]
+            windows = [self._depth_windows(crop, window.to_image, window, False)]
             side = lateral_cut(center_c, height, cloud.intrinsics) if p.edge_window else 0
             if side:
                 to_border = border_window(
@@ -450,8 +466,11 @@ class PeopleDetector:
                 footprint = window_footprint(to_border, cloud.shape)
                 border_crop = self._crop(head, height, cloud, g_T_c, footprint, window.stride)
                 border = window._replace(to_image=to_border, footprint=footprint)
-                windows.append(self._silhouette(border_crop, to_border, border, True))
-            return max(self.hog.score(w) for w in windows), crop
+                windows.append(self._depth_windows(border_crop, to_border, border, True))
+            if p.depth_classifier == "trained":
+                model = self.depth_model or default_depth_classifier(str(p.depth_model))
+                return max(model.score(*pair) for pair in windows), crop, windows  # type: ignore[arg-type]
+            return max(self.hog.score(pair[0]) for pair in windows), crop, windows
         assert image is not None
         to_image = (
             window.to_image
@@ -463,13 +482,20 @@ class PeopleDetector:
         if side:
             to_border = border_window(center_c, height, plane.normal, image_intrinsics, fill, side)
             score = max(score, self.hog.score(person_window(image, to_border, mirror=True)))
-        return score, None
+        return score, None, []
 
-    @staticmethod
-    def _silhouette(crop: _Crop, to_image: np.ndarray, window: _Window, mirror: bool) -> np.ndarray:
-        """The HOG window of a crop's own pixels (white on black)."""
+    def _depth_windows(
+        self, crop: _Crop, to_image: np.ndarray, window: _Window, mirror: bool
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """The HOG windows of a crop's own pixels (white on black) and, for the trained
+        depth classifier, of its depth relative to theirs."""
         silhouette = (crop.mask * np.uint8(255)).astype(np.uint8)
-        return person_window(silhouette, to_image, window.footprint[:2], window.stride, mirror)
+        origin, stride = window.footprint[:2], window.stride
+        relative = None
+        if self.params.depth_classifier == "trained":
+            image = relative_depth(crop.camera[2], crop.mask)
+            relative = person_window(image, to_image, origin, stride, mirror, 255)
+        return person_window(silhouette, to_image, origin, stride, mirror), relative
 
     def _crop(
         self,

@@ -49,10 +49,12 @@ def test_lit_scenes_find_nine_in_ten_half_visible_people_and_little_else(recordi
     assert set(score.sources) == {"color"}
 
 
-def test_dark_scene_finds_eight_in_ten_from_depth_alone(recordings):
+def test_dark_scene_finds_nine_in_ten_from_depth_alone(recordings):
+    # the trained depth classifier (OpenCV's people detector on the silhouette: 0.90)
     score = evaluate_recording(recordings["dark"])
     assert set(score.sources) == {"depth"}  # the luminance gate turned colour HOG off
-    assert score.recall >= 0.8, score.as_dict()
+    assert score.recall >= 0.9, score.as_dict()
+    assert score.precision >= 0.98, score.as_dict()
 
 
 def test_detect_command_reads_a_recording_in_the_world_frame(recordings, capsys):
