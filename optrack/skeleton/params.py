@@ -32,7 +32,7 @@ SKELETON_PARAMS = register(
             ),
             Param(
                 "support_weight",
-                0.5,
+                0.1,
                 min=0.0,
                 max=10.0,
                 step=0.05,
@@ -168,7 +168,7 @@ SKELETON_PARAMS = register(
             ),
             Param(
                 "agility_arms_rad",
-                8.0,
+                4.0,
                 min=0.01,
                 max=40.0,
                 step=0.1,
@@ -177,7 +177,7 @@ SKELETON_PARAMS = register(
             ),
             Param(
                 "agility_legs_rad",
-                6.0,
+                4.0,
                 min=0.01,
                 max=40.0,
                 step=0.1,

@@ -27,6 +27,9 @@ __all__ = ["PROPORTIONS", "ShapeSearch", "estimate_shape"]
 PROPORTIONS = ("arms", "legs", "trunk", "width", "limb_radius", "trunk_radius")
 # Relative steps of the two passes (the first coarse, the second fine).
 _STEPS = ((-0.16, -0.08, 0.0, 0.08, 0.16), (-0.04, 0.0, 0.04))
+# The refit's short anneal searches the arms and legs as wide as a random walk of these
+# agilities (rad/s) over _REFIT_DT, whatever tracking's motion model is.
+_REFIT_AGILITY = {"agility_arms_rad": 8.0, "agility_legs_rad": 6.0}
 # The short anneal that refits a frame's pose to a candidate shape.
 _REFIT_PARTICLES = 200
 _REFIT_LAYERS = 3
@@ -79,6 +82,8 @@ class ShapeSearch:
             raise ValueError("estimate_shape needs one tracked pose per cloud, and at least one.")
         self.params = SKELETON_PARAMS.create(params.as_dict() if params is not None else None)
         self.params.particles = _REFIT_PARTICLES
+        for name, value in _REFIT_AGILITY.items():
+            setattr(self.params, name, value)
         self.clouds = [np.asarray(c, dtype=np.float64) for c in clouds]
         self.start = shape
         self.shape = shape
