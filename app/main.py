@@ -42,8 +42,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def choose_source(args: argparse.Namespace, window):  # noqa: ANN001, ANN201 - Qt objects
-    """Make the window's source as the options say; start the embedded site if needed."""
+def wants_embedded_site(args: argparse.Namespace) -> bool:
+    """Whether the window starts a site of its own (no --no-site, --connect or --join, and
+    not started by 'optrack run')."""
+    from optrack.runtime.node import PARENT_ENV  # set by 'optrack run' in what it starts
+
+    return not (args.no_site or args.connect or args.join or os.environ.get(PARENT_ENV))
+
+
+def start_embedded_site(args: argparse.Namespace):  # noqa: ANN201 - a Qt object
+    """The embedded site, started at once: its processes start while the window is built."""
+    from app.embedded_site import EmbeddedSite
+
+    embedded = EmbeddedSite(args.config)
+    embedded.start()
+    return embedded
+
+
+def choose_source(args: argparse.Namespace, window, embedded=None):  # noqa: ANN001, ANN201
+    """Make the window's source as the options say; start the embedded site if needed
+    (``embedded``: one already started by :func:`start_embedded_site`)."""
     import threading
 
     from app.source import SiteSource
@@ -63,9 +81,9 @@ def choose_source(args: argparse.Namespace, window):  # noqa: ANN001, ANN201 - Q
         return BusSource(site, bus, window)
     if args.join or os.environ.get(PARENT_ENV):
         return BusSource(site, bus, window)
-    from app.embedded_site import EmbeddedSite
-
-    embedded = EmbeddedSite(args.config, window)
+    if embedded is None:
+        embedded = start_embedded_site(args)
+    embedded.setParent(window)
     alive = threading.Event()
     alive.set()
     embedded.ended.connect(lambda code, last: alive.clear())
@@ -77,7 +95,6 @@ def choose_source(args: argparse.Namespace, window):  # noqa: ANN001, ANN201 - Q
         label=f"Embedded site '{site}' on this computer",
     )
     window.run_embedded_site(embedded, stop_timeout_s=3 * float(config["site"].stop_timeout_s))
-    embedded.start()
     return source
 
 
@@ -95,16 +112,21 @@ def run(args: argparse.Namespace) -> int:
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
 
-    from app.main_window import MainWindow
     from optrack.errors import UserError
 
     configure_qt()
     app = QApplication.instance() or QApplication([sys.argv[0]])
     app.setApplicationName("optrack")
+    # the site's processes start while this one imports and builds the window
+    embedded = start_embedded_site(args) if wants_embedded_site(args) else None
+    from app.main_window import MainWindow
+
     window = MainWindow()
     try:
-        window.set_source(choose_source(args, window))
+        window.set_source(choose_source(args, window, embedded))
     except UserError as error:
+        if embedded is not None:
+            embedded.stop(timeout_s=5.0)
         print(f"optrack gui: {error}", file=sys.stderr)
         return 1
     window.show()
