@@ -185,7 +185,9 @@ class MainWindow(QMainWindow):
         save = QAction("&Save parameter preset…", self)
         save.triggered.connect(self.parameters._ask_save)
         quit_action = QAction("&Quit", self)
-        quit_action.setShortcut(QKeySequence.StandardKey.Quit)
+        # the desktop's Quit keys; Ctrl+Q where the platform names none (no desktop running)
+        quit_keys = QKeySequence.keyBindings(QKeySequence.StandardKey.Quit)
+        quit_action.setShortcuts(quit_keys or [QKeySequence("Ctrl+Q")])
         quit_action.triggered.connect(self.close)
         for action in (load, save):
             file_menu.addAction(action)
