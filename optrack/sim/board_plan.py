@@ -194,55 +194,7 @@ def _pair_steps(room: _Room, centers: np.ndarray) -> list[BoardStep]:
         if a != b:
             group[a] = b
             chosen.append(pair)
-    steps = []
-    for pair in chosen:  # each pair's board held, then turned another way at the same place
-        turned = _turned_step(room, found[pair])
-        steps += [found[pair]] if turned is None else [found[pair], turned]
-    return steps
-
-
-#: Turns (degrees about the vertical, then up/down) tried for a pair's second board pose;
-#: it counts when its face looks at least PAIR_TURN_MIN_DEG away from the first's.
-PAIR_TURNS = tuple((yaw, pitch) for yaw in (-20, -12, 0, 12, 20) for pitch in (-15, 0, 15))
-PAIR_TURN_MIN_DEG = 10.0
-
-
-def _turned_step(room: _Room, step: BoardStep) -> BoardStep | None:
-    """The same place with the board turned another way (:data:`PAIR_TURNS`), seen whole
-    by both sensors, sharpest for the worst of them: a second pose of the board the pair
-    shares, so that their relative pose does not rest on one board pose (its error, which
-    grows with the angle the board makes with each camera, is not the same for another
-    turn); None when no turn keeps it in both views."""
-    params, board = room.params, room.board
-    chosen = [room.views[i] for i in step.sensors]
-    normal = -step.world_T_board[:3, 2]
-    heading = math.atan2(normal[1], normal[0])
-    tilt = math.asin(float(np.clip(normal[2], -1.0, 1.0)))
-    limit = math.radians(params.max_hold_tilt_deg)
-    normals = []
-    for yaw, pitch in PAIR_TURNS:
-        h, e = (
-            heading + math.radians(yaw),
-            float(np.clip(tilt + math.radians(pitch), -limit, limit)),
-        )
-        normals.append([math.cos(e) * math.cos(h), math.cos(e) * math.sin(h), math.sin(e)])
-    rotations = facing_rotations(np.asarray(normals))
-    centre = step.world_T_board[:3, :3] @ board.center + step.world_T_board[:3, 3]
-    centers = np.tile(centre, (len(normals), 1))
-    sizes = np.stack([_square_pixels(v, rotations, centers, board, params, False) for v in chosen])
-    turned = np.asarray(normals) @ normal < math.cos(math.radians(PAIR_TURN_MIN_DEG))
-    sizes[:, ~turned] = 0.0
-    sight = _sight_points(board)
-    for best in np.argsort(-sizes.min(axis=0)):
-        if sizes[:, best].min() <= 0:
-            break
-        pose = make_pose(rotations[best], centre - rotations[best] @ board.center)
-        if _line_of_sight(room.scene, chosen, transform_points(pose, sight)):
-            smallest = float(sizes[:, best].min())
-            return BoardStep(
-                "hold", pose, step.operator_spot, step.operator_heading, step.sensors, smallest
-            )
-    return None
+    return [found[pair] for pair in chosen]
 
 
 def _held_step(room: _Room, subset: tuple[int, ...], centers: np.ndarray) -> BoardStep | None:
