@@ -353,7 +353,7 @@ DETECTION_PARAMS = register(
             ),
             Param(
                 "min_depth_model_confidence",
-                0.0,
+                -0.5,
                 min=-20.0,
                 max=20.0,
                 step=0.1,

@@ -46,9 +46,10 @@ def test_five_people_without_colour_are_the_five_found_with_it(five_people, mode
     assert matched == 5 and worst < 0.2, worst
     assert match_people(_xz(batch), np.array(PCL_PEOPLE_XZ))[0] == 5
     # Every person clears the threshold, and every other candidate (things 4.8 m away
-    # behind them) stays below it, each by a margin.
+    # behind them) stays below it, each by a margin (log-odds).
+    threshold = float(depth_only.params.min_depth_model_confidence)
     for judgement in depth_only.last_judgements:
-        assert abs(judgement.confidence) > 1.0, judgement.confidence
+        assert abs(judgement.confidence - threshold) > 0.75, judgement.confidence
 
 
 @pytest.mark.parametrize("model", ["pcl", "kinect1", "kinect2"])
@@ -56,7 +57,9 @@ def test_empty_office_without_colour_has_nobody(office, model):
     detector = PeopleDetector(detection_params(model))
     assert detector.process_cloud(office.points, KINECT1).detections == []
     assert detector.last_judgements  # a candidate was judged, and refused
-    assert all(j.source == "depth" and j.confidence < -1.0 for j in detector.last_judgements)
+    threshold = float(detector.params.min_depth_model_confidence)
+    assert all(j.source == "depth" for j in detector.last_judgements)
+    assert all(j.confidence < threshold - 0.75 for j in detector.last_judgements)
 
 
 def test_grabber_frames_give_the_same_people_with_and_without_colour(shared_data):
