@@ -150,11 +150,13 @@ def test_pausing_keeps_the_people_stepping_moves_them_and_resuming_keeps_their_i
     qtbot.wait(1000)
     assert panel.paused and _frames(window) == stepped  # one frame, then still
     after = set(window.top_view.track_positions())
-    # The same people, their IDs kept: at most one newcomer in that frame. (Under load the
-    # sensors paused a few frames apart, and a person seen at two instants was two tracks
-    # until the step brought every sensor to the same instant.)
+    # The same people keep their IDs through the step (one of them may leave the view in
+    # that frame). Newcomers do not count against it: a person whose track was still
+    # tentative when the pause came, or, under load, a person seen at two instants by
+    # sensors paused a few frames apart, gets a track once the step brings every sensor
+    # to the same instant.
     kept = after & set(before)
-    assert kept and len(kept) >= len(after) - 1, (before, after)
+    assert kept and len(kept) >= len(before) - 1, (before, after)
     played = _played(window)
     panel.pause_button.click()  # now "Resume"
     qtbot.waitUntil(lambda: not panel.paused and _played(window) > played + 0.1, timeout=30000)
