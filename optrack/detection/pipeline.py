@@ -447,9 +447,10 @@ class PeopleDetector:
         image_intrinsics: Intrinsics,
         source: str,
     ) -> tuple[float, _Crop | None, list[tuple[np.ndarray, np.ndarray | None]]]:
-        """The candidate's confidence (and its crop and windows when judged on depth): the score of its full-body window; for a person cut by the
-        image's left or right border, the better of that and the score of the window on
-        the border, mirrored there (its visible part judged)."""
+        """The candidate's confidence (and its crop and windows when judged on depth): the
+        score of its full-body window; for a person cut by the image's left or right
+        border, the better of that and the score of the window on the border, mirrored
+        there (its visible part judged)."""
         p = self.params
         plane = self.ground.plane
         assert plane is not None

@@ -227,7 +227,7 @@ class BoardSpec(_Spec):
     # instead of the network procedure; -1: the network procedure.
     intrinsics_sensor: int = -1
     intrinsics_placements: int = 9
-    # (added) The network procedure's placements the operator makes: all (facing each
+    # The network procedure's placements the operator makes: all (facing each
     # sensor, then pairs, then the floor), pairs (pairs, then the floor) or floor (the
     # floor only); the simulated operator asks for what the wizard's page needs.
     steps: Literal["all", "pairs", "floor"] = "all"
