@@ -143,6 +143,7 @@ class Site:
         self._run_dir: Path | None = None
         self._standby: subprocess.Popen[bytes] | None = None
         self.operator: Any = None  # the simulated operator (calibration wizard), if simulated
+        self._receivers: dict[str, tuple[str, int]] = {}  # destination -> (said, errors then)
         self._venue_sensors = False  # the sensors are the embedded venue
         self._skeleton_wanted = False
         self.playback = None
@@ -467,10 +468,26 @@ class Site:
         outputs = statuses.get("outputs")
         if outputs is not None:
             for d in outputs.destinations:
-                waiting = no_receiver_note(d.address, d.last_error)
-                errors = f", {waiting}" if waiting else f", {d.errors} errors" if d.errors else ""
-                parts.append(f"{d.kind} {d.address} sent {d.sent}{errors}")
+                parts.append(f"{d.kind} {d.address} sent {d.sent}{self._receiver_note(d)}")
         return "; ".join(parts)
+
+    def _receiver_note(self, d: Any) -> str:
+        """What the summary says of a destination's receiver: "no receiver on ADDRESS yet"
+        once (not at every report while nobody listens), "a receiver listens on ADDRESS
+        now" once when its errors stop, the error count for real faults."""
+        waiting = no_receiver_note(d.address, d.last_error)
+        if not waiting:
+            return f", {d.errors} errors" if d.errors else ""
+        key = f"{d.kind} {d.address}"
+        said, errors = self._receivers.get(key, ("", -1))
+        self._receivers[key] = (said, d.errors)
+        if said != "waiting" and d.errors > errors:  # nobody listens (again)
+            self._receivers[key] = ("waiting", d.errors)
+            return f", {waiting}"
+        if said == "waiting" and d.errors == errors:  # refused no datagram since the last report
+            self._receivers[key] = ("listening", d.errors)
+            return f", a receiver listens on {d.address} now"
+        return ""
 
     # ------------------------------------------------------------------ stop
     def request_stop(self) -> None:
