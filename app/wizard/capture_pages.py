@@ -43,8 +43,10 @@ class ExtrinsicsPage(WizardPage):
         super().__init__(
             "3. Extrinsics: move the checkerboard",
             "Walk the board through the room. Hold it still wherever two sensors see it at "
-            "once (both images show it with coloured corners). A sensor turns green in the "
-            "graph when it is calibrated; keep going until every count is green.",
+            "once (both images show it with coloured corners). A sensor is calibrated, and "
+            "turns green in the graph, once it has shared the board with calibrated sensors "
+            "at enough places (its status counts them); keep going until every count is "
+            "green.",
         )
         splitter = QSplitter(Qt.Orientation.Vertical)
         self.images = SensorImages(columns=3)
@@ -146,7 +148,9 @@ class ExtrinsicsPage(WizardPage):
                 rows[sensor] = {"status": "no views from its node"}
                 levels[sensor] = "red"
                 continue
-            status = "calibrated" if live.calibrated else "not yet"
+            status = "calibrated" if live.settled else "not yet"
+            if live.calibrated and not live.settled:  # joined, on too little shared evidence
+                status = f"{live.shared_poses} of {live.shared_needed} shared views"
             if live.calibrated and live.parent:
                 status += f" (via {live.parent})"
             rows[sensor] = {
@@ -160,10 +164,11 @@ class ExtrinsicsPage(WizardPage):
                 sensor,
                 live.image,
                 live.board_seen,
-                caption=f"{sensor}: {views_text(live.views)}" + (" ✓" if live.calibrated else ""),
+                caption=f"{sensor}: {views_text(live.views)}" + (" ✓" if live.settled else ""),
             )
         self.table.set_rows(rows, levels)
-        calibrated = {s for s, live in state.sensors.items() if live.calibrated}
+        # calibrated: on enough shared board poses (calibration_live.min_shared_poses)
+        calibrated = {s for s, live in state.sensors.items() if live.settled}
         self.graph.set_graph(wizard.sensors, calibrated, state.covisibility, (fair, good))
         rms = [live.rms_px for live in state.sensors.values() if live.rms_px is not None]
         self.rms.setText(

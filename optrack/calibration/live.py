@@ -110,6 +110,34 @@ LIVE_PARAMS = register(
                 help="The refinement phase keeps at most this many seconds of detections.",
             ),
             Param(
+                "min_shared_poses",
+                2,
+                min=1,
+                max=20,
+                step=1,
+                help="The extrinsics page calls a sensor calibrated once it shares this many "
+                "distinct board poses with calibrated sensors (one pose leaves it where that "
+                "pose's one view put it: on six sensors up to 2 cm and 0.6 degree off).",
+            ),
+            Param(
+                "shared_pose_spacing",
+                0.3,
+                min=0.0,
+                max=5.0,
+                unit="m",
+                help="Two board poses a sensor shares are distinct when their centres are "
+                "this far apart (or turned by shared_pose_turn_deg).",
+            ),
+            Param(
+                "shared_pose_turn_deg",
+                15.0,
+                min=0.0,
+                max=90.0,
+                unit="deg",
+                help="Two board poses a sensor shares are distinct when turned this far from "
+                "each other (or shared_pose_spacing apart).",
+            ),
+            Param(
                 "refinement_board_growth",
                 0.25,
                 min=0.0,
@@ -157,6 +185,17 @@ class SensorLive:
     capture_hz: float = 0.0
     # tree parent in the network (None for the root or uncalibrated)
     parent: str | None = None
+    # extrinsics: distinct board poses this sensor shares with calibrated sensors, the
+    # number it needs (0: no such rule), and those poses' board centres (Kx3, the frame of
+    # world_T_camera)
+    shared_poses: int = 0
+    shared_needed: int = 0
+    shared_centers: np.ndarray | None = None
+
+    @property
+    def settled(self) -> bool:
+        """Calibrated on enough shared evidence (what the extrinsics page asks for)."""
+        return self.calibrated and self.shared_poses >= self.shared_needed
 
 
 @dataclasses.dataclass

@@ -77,6 +77,17 @@ PLACEMENT_PARAMS = (
         "(held steeper, its top edge would lean into the operator).",
     ),
     Param(
+        "place_spacing",
+        0.6,
+        0.1,
+        5.0,
+        0.1,
+        "m",
+        "A camera's further board pose is held at least this far from the ones it already "
+        "shares (two places, not one twice: the extrinsics page asks each camera for "
+        "calibration_live.min_shared_poses).",
+    ),
+    Param(
         "image_margin",
         0.06,
         0.0,
@@ -213,6 +224,9 @@ class BoardSuggestion:
     #: the live calibration's frame from this one (its solved poses are in it until the
     #: floor is solved): see :meth:`in_frame`
     frame_T_world: np.ndarray | None = None
+    #: (board poses the sensor shares with calibrated cameras, poses it needs): the
+    #: sentence starts with them for a camera that is calibrated but needs more
+    shared: tuple[int, int] | None = None
 
     @property
     def found(self) -> bool:
@@ -237,6 +251,20 @@ class BoardSuggestion:
 
     def sentence(self) -> str:
         """What the operator does, in one sentence."""
+        if self.shared is not None:
+            have, need = self.shared
+            head = f"{self.sensor}: {have} of {need} shared views; "
+            if not self.found:
+                return head + (
+                    "show it the board again together with a calibrated camera, at another "
+                    "place than before (no such place was found from the cameras' poses)."
+                )
+            x, y, height = (float(c) for c in self.center)
+            return head + (
+                f"stand at about ({x:.1f}, {y:.1f}) with the board's centre {height:.1f} m "
+                f"high, facing {' and '.join((self.sensor, *self.partners))} (the green area "
+                "in the views)."
+            )
         if not self.found:
             return (
                 f"No place was found where {self.sensor} and a calibrated camera both see "
@@ -283,10 +311,13 @@ def suggest_board(
     calibrated: Sequence[str],
     board: Checkerboard,
     params: Params | None = None,
+    avoid: np.ndarray | None = None,
 ) -> BoardSuggestion:
     """Where ``sensor`` (its pose a rough one: not calibrated yet) and the calibrated
     camera that sees the board sharpest with it both see the board whole, facing between
-    them; ``found`` is False when no calibrated camera shares such a place."""
+    them; ``found`` is False when no calibrated camera shares such a place. ``avoid``
+    (K, 3): board centres the sensor already shares; places nearer than
+    ``place_spacing`` to one of them are left out (a further pose, not the same again)."""
     params = params if params is not None else GUIDANCE_PARAMS.create()
     limits = BoardLimits(
         float(params.image_margin), float(params.max_incidence_deg), float(params.square_px_min)
@@ -294,6 +325,11 @@ def suggest_board(
     outline, squares = _board_outline(board)
     target = views[sensor]
     centers = _places(list(views.values()), params)
+    if avoid is not None and len(avoid):
+        near = np.linalg.norm(centers[:, None, :] - np.asarray(avoid)[None], axis=2).min(axis=1)
+        centers = centers[near >= float(params.place_spacing)]
+    if not len(centers):
+        return BoardSuggestion(sensor, (), np.zeros((0, 2)), np.zeros(3), np.zeros(3))
     best: tuple[float, str, np.ndarray, np.ndarray, np.ndarray] | None = None
     for partner in calibrated:
         pair = (target, views[partner])

@@ -37,7 +37,7 @@ class HeadlessPlan:
 def describe_state(state: LiveState) -> str:
     """One progress line: the phase, each sensor's views and search rate, the advice."""
     sensors = ", ".join(
-        f"{s} {v.views} view{'' if v.views == 1 else 's'}{' calibrated' if v.calibrated else ''} "
+        f"{s} {v.views} view{'' if v.views == 1 else 's'}{' calibrated' if v.settled else ''} "
         f"({v.capture_hz:.1f} Hz)"
         for s, v in sorted(state.sensors.items())
     )
@@ -86,7 +86,8 @@ def _capture(
         )
 
     def extrinsics_done(state: LiveState) -> bool:
-        return all(v.calibrated and v.views >= plan.min_views for v in state.sensors.values())
+        # calibrated on enough shared board poses (calibration_live.min_shared_poses)
+        return all(v.settled and v.views >= plan.min_views for v in state.sensors.values())
 
     timings = {
         "extrinsics_s": _run_phase(live, "extrinsics", plan.extrinsics_s, extrinsics_done, say)

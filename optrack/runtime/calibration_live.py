@@ -18,6 +18,7 @@ this module only talks to the site::
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import queue
@@ -39,6 +40,7 @@ from optrack.calibration.live import (
     Progress,
     RefinementReport,
 )
+from optrack.calibration.live_evidence import board_centres, shared_board_poses
 from optrack.calibration.live_session import LiveSession
 from optrack.calibration.network import NETWORK_PARAMS, NetworkResult
 from optrack.errors import UserError
@@ -270,9 +272,38 @@ class LiveCalibration:
 
     # ------------------------------------------------------- state and solving
     def state(self) -> LiveState:
-        """A cheap snapshot (polled at ~5 Hz by the GUI)."""
+        """A cheap snapshot (polled at ~5 Hz by the GUI): in the extrinsics, each sensor's
+        shared board poses (:attr:`SensorLive.settled` once it has
+        ``calibration_live.min_shared_poses``) and where to hold the board next."""
         state = self.session.state(self.operator.doing() if self.operator is not None else "")
-        return self.guide.advise(state)
+        return self.guide.advise(self._with_evidence(state))
+
+    def _with_evidence(self, state: LiveState) -> LiveState:
+        """``state`` with each sensor's distinct board poses shared with calibrated ones."""
+        if state.phase != "extrinsics":
+            return state
+        p = self.params
+        with self.session.lock:
+            calibrator = self.session.calibrator
+            if calibrator is None:
+                return state
+            shared = shared_board_poses(
+                calibrator, float(p.shared_pose_spacing), float(p.shared_pose_turn_deg)
+            )
+            centre = calibrator.board.center
+        sensors = {}
+        for sid, live in state.sensors.items():
+            poses = shared.get(sid, [])
+            centres = None
+            if live.world_T_camera is not None:
+                centres = board_centres(live.world_T_camera, poses, centre)
+            sensors[sid] = dataclasses.replace(
+                live,
+                shared_poses=len(poses),
+                shared_needed=int(p.min_shared_poses),
+                shared_centers=centres,
+            )
+        return dataclasses.replace(state, sensors=sensors)
 
     def calibrate_intrinsics(self, sensor: str, progress: Progress) -> IntrinsicsResult:
         """One sensor's lens from its views of the intrinsics phase (LiveSession)."""

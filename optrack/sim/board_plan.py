@@ -194,7 +194,17 @@ def _pair_steps(room: _Room, centers: np.ndarray) -> list[BoardStep]:
         if a != b:
             group[a] = b
             chosen.append(pair)
-    return [found[pair] for pair in chosen]
+    # Each pair at a second place too, ``place_spacing`` from the first (the extrinsics page
+    # asks each sensor for calibration_live.min_shared_poses board poses; one pose leaves a
+    # sensor where that one view put it).
+    steps = []
+    for pair in chosen:
+        steps.append(found[pair])
+        first = transform_points(found[pair].world_T_board, room.board.center[None])[0]
+        far = np.linalg.norm(centers - first, axis=1) >= float(room.params.place_spacing)
+        if (second := _held_step(room, pair, centers[far])) is not None:
+            steps.append(second)
+    return steps
 
 
 def _held_step(room: _Room, subset: tuple[int, ...], centers: np.ndarray) -> BoardStep | None:

@@ -408,3 +408,49 @@ def test_the_extrinsics_page_says_where_to_hold_the_board_and_the_top_view_shows
     page.cleanupPage()  # Back: the views forget it
     assert window.top_view.guidance_items == []
     window.close()
+
+
+def test_a_sensor_on_one_shared_board_pose_is_not_called_calibrated_and_next_waits(qtbot):
+    """A sensor joined the network at its first shared view; the page calls it calibrated
+    only once it shares calibration_live.min_shared_poses board poses: until then its
+    status counts them, it is not green, Next waits, and the guide says where the next
+    pose goes (away from the one it has) in a sentence that starts with the count."""
+    from optrack.calibration.synthetic import look_at
+    from optrack.runtime.calibration_guidance import BoardGuide
+
+    wizard = CalibrationWizard(None, world_view=False)
+    qtbot.addWidget(wizard)
+    wizard.sensors = ["cam0", "cam1"]
+    page = wizard.extrinsics_page
+    page.images.set_sensors(wizard.sensors)
+    rough = {
+        "cam0": look_at(np.array([-2.5, -2.0, 2.3]), np.array([0.0, 0.5, 0.9])),
+        "cam1": look_at(np.array([2.5, -2.0, 2.3]), np.array([0.0, 0.5, 0.9])),
+    }
+    guide = BoardGuide(wizard.board)
+    for name, pose in rough.items():
+        guide.set_pose(name, pose)
+    shared = np.array([[0.0, 0.6, 1.3]])  # the one pose both share (the rough frame here)
+    live = {}
+    for name in rough:
+        live[name] = sensor(name, 6, True, 0.2, shared_poses=1, shared_needed=2)
+        live[name].world_T_camera = rough[name]
+        live[name].shared_centers = shared
+    advised = guide.advise(state("extrinsics", list(live.values()), [("cam0", "cam1", 6)]))
+    page.show_state(advised)
+    assert page.table.text("cam0", "status") == "1 of 2 shared views"
+    assert page.graph.calibrated == set() and not page.isComplete()
+    assert page.images.tiles["cam0"].caption == "cam0: 6 views"
+    guidance = advised.guidance
+    assert guidance is not None and guidance.found and guidance.sensor == "cam0"
+    assert guidance.partners == ("cam1",)
+    x, y, _ = guidance.center
+    assert page.message.text().startswith(f"cam0: 1 of 2 shared views; stand at about ({x:.1f}")
+    assert np.linalg.norm(guidance.center - shared[0]) >= guide.params.place_spacing
+    for name in rough:  # a second pose shared: calibrated, green, Next
+        live[name].shared_poses = 2
+    done = guide.advise(state("extrinsics", list(live.values()), [("cam0", "cam1", 12)]))
+    assert done.guidance is None
+    page.show_state(done)
+    assert page.table.text("cam0", "status") == "calibrated"
+    assert page.graph.calibrated == {"cam0", "cam1"} and page.isComplete()
