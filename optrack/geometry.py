@@ -70,12 +70,30 @@ def invert(pose: np.ndarray) -> np.ndarray:
     return out
 
 
+_BY_COLUMNS_FROM = 2000  # points; below it the matrix product is as fast
+
+
 def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Apply ``a_T_b`` to Nx3 (or ...x3) points in frame b; NaNs stay NaN."""
     points = np.asarray(points)
     pose = np.asarray(pose, dtype=np.float64)
-    out = points @ pose[:3, :3].T + pose[:3, 3]
-    return out.astype(np.result_type(points.dtype, np.float32), copy=False)
+    dtype = np.result_type(points.dtype, np.float32)
+    if points.size < 3 * _BY_COLUMNS_FROM:
+        out = points @ pose[:3, :3].T + pose[:3, 3]
+        return out.astype(dtype, copy=False)
+    # By columns, in the points' own precision: an (N, 3) x (3, 3) product goes to BLAS,
+    # whose threads spin (a 640x480 cloud: 40 ms of CPU against 2 ms this way).
+    flat = points.reshape(-1, 3)
+    matrix = np.asarray(pose, dtype=dtype)
+    out = np.empty(flat.shape, dtype=dtype)
+    x, y, z = flat[:, 0], flat[:, 1], flat[:, 2]
+    for i in range(3):
+        column = out[:, i]
+        np.multiply(x, matrix[i, 0], out=column)
+        column += y * matrix[i, 1]
+        column += z * matrix[i, 2]
+        column += matrix[i, 3]
+    return out.reshape(points.shape)
 
 
 def pose_from_quaternion(

@@ -35,6 +35,21 @@ def test_pose_composed_with_its_inverse_is_identity():
         np.testing.assert_allclose(invert(pose), np.linalg.inv(pose), atol=1e-12)
 
 
+@pytest.mark.parametrize("dtype, atol", [(np.float32, 2e-5), (np.float64, 1e-12)])
+def test_transform_points_of_a_whole_organised_cloud_matches_the_matrix_product(dtype, atol):
+    # A 480x640x3 cloud (by columns, not BLAS) against the 4x4 product in float64:
+    # same values to the dtype's precision, NaNs (no depth) kept, shape and dtype kept.
+    pose = random_pose()
+    cloud = RNG.uniform(-5, 5, (480, 640, 3)).astype(dtype)
+    cloud[::7, ::5] = np.nan
+    moved = transform_points(pose, cloud)
+    homogeneous = np.concatenate([cloud.reshape(-1, 3), np.ones((480 * 640, 1))], axis=1)
+    expected = (homogeneous.astype(np.float64) @ pose.T)[:, :3].reshape(cloud.shape)
+    assert moved.shape == cloud.shape and moved.dtype == dtype
+    np.testing.assert_allclose(moved, expected, atol=atol, rtol=0)
+    assert np.isnan(moved[::7, ::5]).all() and np.isfinite(moved[1::7, 1::5]).all()
+
+
 def test_compose_chains_frames_left_to_right():
     a_T_b, b_T_c = random_pose(), random_pose()
     point_c = np.array([[0.3, -1.2, 2.5]])
