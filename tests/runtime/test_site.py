@@ -8,6 +8,7 @@ import json
 import os
 import signal
 import time
+from pathlib import Path
 
 import pytest
 from websockets.sync.client import connect
@@ -109,6 +110,18 @@ def test_the_site_shows_about_as_many_tracks_as_there_are_people(site, venue):
     assert len(counts) > 20
     print(f"{people} people; tracks per frame: max {max(counts)}, counts {sorted(set(counts))}")
     assert max(counts) <= people + 1
+
+
+def test_every_node_runs_numpys_blas_on_one_thread(site):
+    # The nodes are processes of their own: BLAS threads in each would spin against the
+    # others (OPENBLAS_NUM_THREADS=1 unless the user set it).
+    site.wait(lambda: "site" in site.statuses, 60, "no site status")
+    values = site.statuses["site"].values
+    pids = {k[4:]: int(v) for k, v in values.items() if k.startswith("pid.") and int(v) > 0}
+    assert set(SENSORS) <= set(pids) and "tracker" in pids
+    for name, pid in pids.items():
+        environ = (Path("/proc") / str(pid) / "environ").read_bytes().split(b"\0")
+        assert b"OPENBLAS_NUM_THREADS=1" in environ, name
 
 
 def test_a_killed_detector_restarts_within_5s_while_the_tracker_keeps_tracking(site):
