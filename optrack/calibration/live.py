@@ -110,6 +110,16 @@ LIVE_PARAMS = register(
                 help="The refinement phase keeps at most this many seconds of detections.",
             ),
             Param(
+                "operator_searches",
+                3,
+                min=1,
+                max=20,
+                step=1,
+                help="A simulated operator asked to go round again (a sensor still needs "
+                "shared board poses) holds the board long enough for this many searches of "
+                "the slowest node, at least its own hold.",
+            ),
+            Param(
                 "min_shared_poses",
                 2,
                 min=1,
@@ -117,7 +127,7 @@ LIVE_PARAMS = register(
                 step=1,
                 help="The extrinsics page calls a sensor calibrated once it shares this many "
                 "distinct board poses with calibrated sensors (one pose leaves it where that "
-                "pose's one view put it: on six sensors up to 2 cm and 0.6 degree off).",
+                "one pose put it).",
             ),
             Param(
                 "shared_pose_spacing",

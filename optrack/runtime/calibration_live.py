@@ -104,6 +104,7 @@ class LiveCalibration:
         self._statuses: dict[str, StatusMessage] = {}
         self._capturing: list[str] = []
         self._closed = False
+        self._next_check = 0.0  # when _keep_going looks at the operator next
         self._subscriptions = [bus.subscribe(bus.keys.status(), StatusMessage, self._on_status)]
         self.sensors = list(sensors) if sensors else self._discover()
         if not self.sensors:
@@ -197,6 +198,10 @@ class LiveCalibration:
     def _loop(self) -> None:
         while not self._closed:
             try:
+                self._keep_going()
+            except UserError as error:
+                self.session.say(str(error))
+            try:
                 kind, message = self._inbox.get(timeout=0.2)
             except queue.Empty:
                 self.session.flush()
@@ -214,6 +219,27 @@ class LiveCalibration:
                 self.session.say(
                     f"a board view could not be used ({type(error).__name__}: {error})."
                 )
+
+    def _keep_going(self) -> None:
+        """While the extrinsics still ask a sensor for shared board poses and the site's
+        operator has made every placement it was asked, it goes round again, holding the
+        board long enough for ``calibration_live.operator_searches`` searches of the
+        slowest node (a loaded computer's nodes search an image every few seconds: a
+        hold may have given one of them no still pair)."""
+        operator, now = self.operator, time.monotonic()
+        if operator is None or self.session.phase != "extrinsics" or now < self._next_check:
+            return
+        self._next_check = now + 1.0
+        if not operator.finished():
+            return
+        state = self._with_evidence(self.session.state())
+        if state.phase != "extrinsics" or all(v.settled for v in state.sensors.values()):
+            return
+        rates = [v.capture_hz for v in state.sensors.values() if v.capture_hz > 0]
+        hold = float(self.params.operator_searches) / min(rates) if rates else 0.0
+        sentence = operator.act("extrinsics", self.board, None, min(hold, 60.0))
+        self.session.say(sentence)
+        log.info("the simulated operator goes round again (hold %.1f s)", hold)
 
     # ---------------------------------------------------------------- phases
     def start(self, phase: str, sensor: str | None = None) -> None:

@@ -35,10 +35,16 @@ class BoardOperator(Protocol):
     """Whoever does on site what a calibration phase needs (show the board to one sensor,
     move it between the sensors, lay it on the floor, walk through every view)."""
 
-    def act(self, phase: str, board: Checkerboard, sensor: str | None) -> str:
+    def act(self, phase: str, board: Checkerboard, sensor: str | None, hold_s: float = 0.0) -> str:
         """Start doing what ``phase`` needs with ``board`` (``sensor``: the one the
-        intrinsics are for); returns a sentence saying so. A UserError sentence when it
-        cannot."""
+        intrinsics are for; ``hold_s``: how long to hold the board still at each place,
+        0 for the operator's own habit); returns a sentence saying so. A UserError
+        sentence when it cannot."""
+        ...
+
+    def finished(self) -> bool:
+        """Whether it has made every placement of what it was asked (it then stands with
+        the board; asked again, it goes round again)."""
         ...
 
     def wait(self) -> None:
@@ -98,7 +104,7 @@ class SiteOperator:
             return None
         return cls(bus, sensors, status, timeout_s, wait_s)
 
-    def act(self, phase: str, board: Checkerboard, sensor: str | None) -> str:
+    def act(self, phase: str, board: Checkerboard, sensor: str | None, hold_s: float = 0.0) -> str:
         action = OPERATOR_ACTION[phase]
         reply = send_command(
             self.bus,
@@ -111,6 +117,7 @@ class SiteOperator:
                 "square": board.square,
                 "pairs": phase == "extrinsics",
                 "sensor": sensor or "",
+                "hold": float(hold_s),
             },
             self.timeout_s,
         )
@@ -143,6 +150,13 @@ class SiteOperator:
                     "(optrack run)."
                 )
             time.sleep(0.2)
+
+    def finished(self) -> bool:
+        site = self.status("site")
+        if site is None or site.values.get("operator.scene") != self.scene:
+            return False
+        until = str(site.values.get("operator.until", ""))
+        return bool(until) and time.time() > float(until)
 
     def doing(self) -> str:
         site = self.status("site")

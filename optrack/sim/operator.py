@@ -222,6 +222,7 @@ class _Order:
     places: int = 0
     pairs: bool = False
     shown: int = -1
+    hold: float = 0.0  # seconds the board is held still at each place (0: the params')
 
 
 class SimulatedOperator:
@@ -262,11 +263,20 @@ class SimulatedOperator:
         self.options = dict(options or {})
         self.count = 0
         self.error = ""
+        self.until = 0.0  # wall clock when the scene's placements are all made (0: none)
         self._lock = threading.Lock()
 
     def status_values(self) -> dict[str, str]:
-        """For the site status: what the operator does, its scene, what went wrong."""
-        return {"operator": self.action, "operator.scene": self.scene, "operator.error": self.error}
+        """For the site status: what the operator does, its scene, what went wrong, and
+        when (wall clock, s) it will have made every placement of its scene ("" when
+        it has none to make)."""
+        until = f"{self.until:.3f}" if self.until else ""
+        return {
+            "operator": self.action,
+            "operator.scene": self.scene,
+            "operator.error": self.error,
+            "operator.until": until,
+        }
 
     @classmethod
     def for_site(
@@ -347,11 +357,13 @@ class SimulatedOperator:
         bus.serve(bus.keys.command("site"), CommandRequest, answer)
 
     def command(self, args: dict[str, Any]) -> dict[str, Any]:
-        """``{action, cols, rows, square, places, pairs, sensor}`` -> ``{action, scene}``;
+        """``{action, cols, rows, square, places, pairs, sensor, hold}`` -> ``{action, scene}``;
         the nodes restart on the scene in the background (their status ``sensor`` names
         the scene; a scene that cannot be made is ``operator.error`` in the site status).
         ``pairs`` (move_board): skip the placements facing one sensor (the extrinsics need
-        pairs). ``sensor`` (show_board): the detector node whose intrinsics are wanted."""
+        pairs). ``sensor`` (show_board): the detector node whose intrinsics are wanted.
+        ``hold``: seconds to hold the board still at each place (default
+        ``sim_operator.hold_s``; longer where the nodes search their images slowly)."""
         action = str(args.get("action", ""))
         if action not in OPERATOR_ACTIONS:
             raise OperatorError(
@@ -372,6 +384,17 @@ class SimulatedOperator:
         if action in ("move_board", "show_board", "lay_board"):
             order.board = self._board(args)
         order.places = int(args.get("places", self.params.floor_places))
+        try:
+            order.hold = float(args.get("hold", 0.0) or 0.0)
+        except (TypeError, ValueError):
+            raise OperatorError(
+                f"the simulated operator holds the board for a number of seconds; got "
+                f"hold={args.get('hold')!r}."
+            ) from None
+        if not 0.0 <= order.hold <= 60.0:
+            raise OperatorError(
+                f"the simulated operator holds the board 0 to 60 s at a place; got {order.hold:g}."
+            )
         if action == "lay_board" and not 1 <= order.places <= 10:
             raise OperatorError(
                 f"the operator lays the board at 1 to 10 places; got {order.places}."
@@ -380,6 +403,7 @@ class SimulatedOperator:
             self.count += 1
             order.scene = "" if action == "people" else f"operator-{self.count}-{action}"
             self.action, self.scene, self.error = action, order.scene, ""
+            self.until = 0.0
         threading.Thread(target=self._prepare, args=(order,), daemon=True).start()
         return {"action": action, "scene": order.scene}
 
@@ -476,21 +500,27 @@ class SimulatedOperator:
         path = self.run_dir / f"{order.scene}.yaml"
         # whole or not at all: detector nodes load the scene as soon as the file appears
         atomic_write_text(path, yaml.safe_dump(data, sort_keys=False))
-        if action in ("move_board", "lay_board"):
-            self._check_steps(path)
+        # at least the operator's own hold (longer when asked: slow nodes)
+        hold = max(order.hold, float(p.intrinsics_hold_s if action == "show_board" else p.hold_s))
+        planned = self._check_steps(path, hold) if action in ("move_board", "lay_board") else 0.0
         start = time.time() + float(p.lead_s)
+        if planned:
+            with self._lock:
+                if self.scene == order.scene:
+                    self.until = start + planned
         extra = "".join(f"&{k}={urllib.parse.quote(v)}" for k, v in sorted(self.options.items()))
         if spec is not None:
-            hold = float(p.intrinsics_hold_s if action == "show_board" else p.hold_s)
             extra += f"&hold={hold:g}"
         return [
             f"sim://{path}/{index}?seed={self.seed}{extra}&start={start:.3f}&id={name}"
             for name, index in self.sensors
         ]
 
-    def _check_steps(self, path: Path) -> None:
+    def _check_steps(self, path: Path, hold: float) -> float:
         """Refuse a scene whose operator has no placement to make (the board is seen by no
-        two sensors together, or nowhere on the floor)."""
+        two sensors together, or nowhere on the floor); else the seconds its placements
+        take (the board held ``hold`` s at each)."""
+        from optrack.sim.board import BOARD_PARAMS
         from optrack.sim.world import Simulation
 
         sensors = self.options.get("sensors")
@@ -499,9 +529,11 @@ class SimulatedOperator:
             seed=self.seed,
             sensors=int(sensors) if sensors else None,
             sensor_model=self.options.get("model") or None,
+            params={"sim_board": BOARD_PARAMS.create({"hold_seconds": hold})},
         )
         if sim.operator is None or not sim.operator.steps:
             raise OperatorError(
                 "the simulated operator found no place for the board that the sensors see "
                 "(together, or on the floor); use a larger board or check the sensors' views."
             )
+        return sim.operator.planned_seconds(sim.operator.start_point)

@@ -7,7 +7,6 @@ site is the one `make run` starts (`optrack gui`: no sensors configured, the emb
 of three simulated Kinect v2); the others are 2, 4 and 6 simulated sensors.
 OpenGL (the 3D view of the extrinsics page): run under Xvfb."""
 
-import os
 import time
 
 import numpy as np
@@ -202,9 +201,9 @@ def extrinsics_page(qtbot, wizard, truth, sensor: str | None, lens) -> None:
     assert wizard.currentPage() is extrinsics
     took = waited(qtbot, extrinsics.isComplete, 420, "calibrating every sensor", wizard)
     print(f"every sensor calibrated {took:.0f} s after the extrinsics page opened")
-    # Next is enabled from a sensor's first shared view; the page asks to go on until the
-    # counts turn green: the operator goes on until none is red (one view of one board
-    # pose would leave the last sensor calibrated where that one pose put it).
+    # Next is enabled once every sensor shares two board poses with calibrated ones
+    # (calibration_live.min_shared_poses); the page asks to go on until the counts turn
+    # green: the operator goes on until none is red.
     fair, good = wizard.view_thresholds("extrinsics")
 
     def none_red() -> bool:
@@ -214,6 +213,13 @@ def extrinsics_page(qtbot, wizard, truth, sensor: str | None, lens) -> None:
     took += waited(qtbot, none_red, 300, f"{fair} views of every sensor", wizard)
     print(f"{fair} views of every sensor {took:.0f} s after the extrinsics page opened")
     state = extrinsics.last_state
+    print(
+        "shared board poses: "
+        + ", ".join(f"{s} {v.shared_poses}" for s, v in sorted(state.sensors.items()))
+    )
+    for name, live in state.sensors.items():  # calibrated on two shared board poses at least
+        assert live.settled and live.shared_poses >= live.shared_needed >= 2, name
+        assert extrinsics.table.text(name, "status").startswith("calibrated")
     if sensor is not None:
         assert state.sensors[sensor].intrinsics == lens.intrinsics
     views = extrinsics.table.keys.index("views")
@@ -331,19 +337,7 @@ def review_page(qtbot, wizard, truth, report, tmp_path):
     return path
 
 
-# Six sensors: run with OPTRACK_WIZARD_SIX=1. They missed the target in 4 of 7 runs (the
-# sensor at the end of the chain of pairs calibrated from one board pose: docs/gui.md).
-SIX = pytest.mark.skipif(
-    not os.environ.get("OPTRACK_WIZARD_SIX"),
-    reason="six sensors miss 2 cm / 0.3 deg in 4 of 7 runs (docs/gui.md); OPTRACK_WIZARD_SIX=1",
-)
-
-
-@pytest.mark.parametrize(
-    "window",
-    [pytest.param(site, marks=[SIX] if site == "six" else []) for site in sorted(SITES)],
-    indirect=True,
-)
+@pytest.mark.parametrize("window", sorted(SITES), indirect=True)
 def test_the_wizard_calibrates_the_simulated_site_from_page_1_to_finish(qtbot, window, tmp_path):
     site = window.site_name
     truth = truth_poses(site)
