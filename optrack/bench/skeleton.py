@@ -13,7 +13,12 @@ and a digest of the simulator's code).
   the three sensors' views overlap), scored with the three sensors, the first
   two, and the first alone: the same recording, so the settings differ only
   by the sensors fused. ``accuracy`` holds each setting's figures over all
-  those clips together and per clip.
+  those clips together and per clip, ``initialisation`` among them: how soon
+  each person is tracked after they appear (``init_s`` per clip, its median
+  and maximum, ``init_within_1s``; :func:`~optrack.evaluation.skeleton.initialisation_times`):
+  each clip has its performer enter in the pose it starts with.
+* Initialisation in a crowd: ``initialisation_4people_3sensors``, the four
+  performers of the speed run below (each clip's first pose), three sensors.
 * Speed: ``fps_1person_3sensors`` (person-frames per second of the stage:
   backprojection of each person's image rectangle, crop, decimation and the
   tracker's update) on the first clip with three sensors, and
@@ -38,7 +43,13 @@ import numpy as np
 
 from optrack.bench.common import info, shared_data
 from optrack.bench.tracking import bench_cache
-from optrack.evaluation.skeleton import SkeletonRun, run_skeleton, score_markers
+from optrack.evaluation.skeleton import (
+    SkeletonRun,
+    initialisation_times,
+    run_skeleton,
+    score_initialisation,
+    score_markers,
+)
 from optrack.recording import Recording
 from optrack.skeleton.fusion import FUSION_PARAMS
 from optrack.skeleton.params import SKELETON_PARAMS
@@ -110,6 +121,12 @@ def _accuracy(runs: dict[str, dict[str, SkeletonRun]]) -> dict[str, Any]:
     for setting, _ in SETTINGS:
         per_clip = {clip: runs[clip][setting] for clip in runs}
         pooled = score_markers(np.concatenate([r.errors for r in per_clip.values()]))
+        times = {
+            f"{clip}/{pid}": t
+            for clip, run in per_clip.items()
+            for pid, t in initialisation_times(run.errors, run.person_ids, run.stamps).items()
+        }
+        pooled["initialisation"] = score_initialisation(times)
         pooled["clips"] = {
             clip: {k: v for k, v in run.figures().items() if k != "sensors"}
             for clip, run in per_clip.items()
@@ -150,6 +167,7 @@ def skeleton_bench(
         "points_per_person": int(FUSION_PARAMS.create().points),
         "points_per_person_mean": round(float(np.mean(alone.points)), 1),
         "accuracy": _accuracy(runs),
+        "initialisation_4people_3sensors": four.initialisation(),
         "seconds_per_clip": seconds,
         "load_average": round(os.getloadavg()[0], 2),
         "cpu_count": os.cpu_count(),

@@ -18,6 +18,15 @@ an estimate; ``pct_under_*`` are the shares of marker-frames under 0.10,
 person-frames per second of the skeleton stage's time: backprojection (of
 each person's image rectangle), crop, decimation and the tracker's update
 (reading and decoding the images is not counted).
+
+``initialisation`` says how soon each person is tracked after they appear:
+``init_s`` is the time from a person's first frame to the first frame from
+which their error (the mean of the four markers; a marker without an
+estimate counts as lost) stays under 0.1 m for :data:`INIT_HOLD_S` (or to
+the end of their frames, if sooner); ``None`` (not counted as within 1 s)
+where it never does. ``init_s_median`` and ``init_s_max`` are over the
+people tracked, ``init_within_1s`` the share of all people tracked within
+1 s (the issue's target).
 """
 
 from __future__ import annotations
@@ -39,11 +48,22 @@ from optrack.skeleton.joints import MARKERS
 from optrack.skeleton.params import SKELETON_PARAMS
 from optrack.skeleton.tracker import JOINTS, SkeletonTracker
 
-__all__ = ["SkeletonRun", "evaluate_skeleton", "marker_errors", "run_skeleton", "score_markers"]
+__all__ = [
+    "SkeletonRun",
+    "evaluate_skeleton",
+    "initialisation_times",
+    "marker_errors",
+    "run_skeleton",
+    "score_initialisation",
+    "score_markers",
+]
 
 _MARKER_INDEX = [JOINTS.index(m) for m in MARKERS]
 THRESHOLDS = (0.10, 0.15, 0.20)
 LOST_M = 0.20
+INIT_ERROR_M = 0.10  # a person is tracked once their error stays under this...
+INIT_HOLD_S = 0.5  # ...for this long
+INIT_TARGET_S = 1.0  # the issue's target: tracked within this of their first frame
 
 
 def marker_errors(truth: np.ndarray, estimate: np.ndarray) -> np.ndarray:
@@ -83,11 +103,48 @@ def score_markers(errors: np.ndarray) -> dict[str, Any]:
     return figures
 
 
+def initialisation_times(
+    errors: np.ndarray, people: np.ndarray, stamps: np.ndarray
+) -> dict[int, float | None]:
+    """Each person's ``init_s`` (see the module docstring) from their person-frames' marker
+    errors (F, len(MARKERS)), person ids (F,) and stamps (F,), in time order per person."""
+    errors = np.asarray(errors, dtype=np.float64).reshape(-1, len(MARKERS))
+    frame_error = np.where(np.isfinite(errors), errors, np.inf).mean(axis=1)
+    people, stamps = np.asarray(people), np.asarray(stamps, dtype=np.float64)
+    out: dict[int, float | None] = {}
+    for pid in dict.fromkeys(people.tolist()):
+        mine = people == pid
+        t, good = stamps[mine] - stamps[mine][0], frame_error[mine] < INIT_ERROR_M
+        # bad_after[k]: the first bad frame at or after k (len(t) if none)
+        bad = np.flatnonzero(~good)
+        first_bad = np.searchsorted(bad, np.arange(len(t)))
+        bad_after = np.append(bad, len(t))[first_bad]
+        ends = np.searchsorted(t, t + INIT_HOLD_S, side="right")
+        held = good & (bad_after >= ends)
+        out[int(pid)] = round(float(t[np.argmax(held)]), 4) if held.any() else None
+    return out
+
+
+def score_initialisation(times: Mapping[int, float | None]) -> dict[str, Any]:
+    """``init_s`` per person (keyed by id, as strings for JSON), their median and maximum
+    over the people tracked, and ``init_within_1s``: the share of all people tracked within
+    :data:`INIT_TARGET_S`."""
+    found = [t for t in times.values() if t is not None]
+    within = sum(t <= INIT_TARGET_S for t in found)
+    return {
+        "init_s": {str(pid): t for pid, t in times.items()},
+        "init_s_median": round(float(np.median(found)), 4) if found else None,
+        "init_s_max": round(float(np.max(found)), 4) if found else None,
+        "init_within_1s": round(within / len(times), 4) if times else None,
+    }
+
+
 @dataclasses.dataclass
 class SkeletonRun:
     """What a run of the skeleton over a recording gives: each person-frame's marker errors
-    (F, len(MARKERS)) and cloud size (F,); each skeleton frame's wall and CPU time (ms, all
-    its people, the CPU time of every thread of the process) and number of people."""
+    (F, len(MARKERS)), cloud size (F,), person id (F,) and stamp (F,, s); each skeleton
+    frame's wall and CPU time (ms, all its people, the CPU time of every thread of the
+    process) and number of people."""
 
     errors: np.ndarray
     points: np.ndarray
@@ -96,6 +153,8 @@ class SkeletonRun:
     frame_people: np.ndarray
     people: int
     sensors: list[str]
+    person_ids: np.ndarray
+    stamps: np.ndarray
 
     def speed(self, skip: int = 0) -> float:
         """Person-frames per second of the skeleton stage, the first ``skip`` frames left
@@ -109,9 +168,15 @@ class SkeletonRun:
         """Person-frames per second of the skeleton stage, every frame counted."""
         return self.speed(0)
 
+    def initialisation(self) -> dict[str, Any]:
+        """:func:`score_initialisation` of the run's people."""
+        return score_initialisation(initialisation_times(self.errors, self.person_ids, self.stamps))
+
     def figures(self) -> dict[str, Any]:
-        """:func:`score_markers` of the run, with its fps, people and sensors."""
+        """:func:`score_markers` of the run, with its initialisation, fps, people and
+        sensors."""
         out = score_markers(self.errors)
+        out["initialisation"] = self.initialisation()
         out["fps"] = self.fps
         out["people"] = self.people
         out["sensors"] = list(self.sensors)
@@ -171,6 +236,8 @@ def run_skeleton(
     trackers: dict[int, SkeletonTracker] = {}
     errors: list[np.ndarray] = []
     points: list[int] = []
+    person_ids: list[int] = []
+    stamps: list[float] = []
     frame_ms: list[float] = []
     frame_cpu_ms: list[float] = []
     frame_people: list[int] = []
@@ -186,6 +253,8 @@ def run_skeleton(
                 trackers[pid] = SkeletonTracker(skeleton, seed=seed + pid)
             estimate = trackers[pid].update(cloud, float(t))
             points.append(len(cloud))
+            person_ids.append(pid)
+            stamps.append(float(t))
             errors.append(marker_errors(markers, estimate.joints[_MARKER_INDEX])[0])
         frame_ms.append((time.perf_counter() - started) * 1000.0)
         frame_cpu_ms.append((time.process_time() - cpu) * 1000.0)
@@ -203,6 +272,8 @@ def run_skeleton(
         np.array(frame_people),
         len(trackers),
         sensors,
+        np.array(person_ids, dtype=np.int64),
+        np.array(stamps),
     )
 
 

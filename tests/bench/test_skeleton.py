@@ -40,6 +40,11 @@ def test_bench_skeleton_keys_on_a_few_frames(shared_data, tmp_path, monkeypatch)
         assert FIGURES <= set(setting)
         assert setting["frames"] == 6  # 0.2 s at 30 Hz
         assert set(setting["clips"]) == {"cmu_16_27_walk_turn_left"}
+        init = setting["initialisation"]
+        assert set(init["init_s"]) == {"cmu_16_27_walk_turn_left/0"}
+        assert set(init) == {"init_s", "init_s_median", "init_s_max", "init_within_1s"}
+    crowd = result["initialisation_4people_3sensors"]
+    assert len(crowd["init_s"]) == 4 and 0.0 <= crowd["init_within_1s"] <= 1.0
     cached = sorted(p.name for p in (tmp_path / "bench").iterdir())
     assert len(cached) == 2 and all(p.startswith("skeleton-") for p in cached)
 

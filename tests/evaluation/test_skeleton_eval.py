@@ -10,7 +10,12 @@ import numpy as np
 import pytest
 
 from optrack.cli import main
-from optrack.evaluation.skeleton import marker_errors, score_markers
+from optrack.evaluation.skeleton import (
+    initialisation_times,
+    marker_errors,
+    score_initialisation,
+    score_markers,
+)
 from optrack.skeleton.joints import MARKERS
 
 FIGURES = {"mean_error_m", "markers", "pct_under_0_10", "pct_under_0_15", "pct_under_0_20"}
@@ -77,6 +82,9 @@ def test_eval_skeleton_end_to_end(mocap_recording, capsys) -> None:
     assert skeleton["fps"] > 0
     assert skeleton["pct_under_0_20"] + skeleton["lost_pct"] == pytest.approx(100.0)
     assert skeleton["mean_error_m"] < 0.4  # loose: the wrong frame or person is metres off
+    init = skeleton["initialisation"]
+    assert set(init) == {"init_s", "init_s_median", "init_s_max", "init_within_1s"}
+    assert len(init["init_s"]) == 1 and init["init_within_1s"] in (0.0, 1.0)
 
 
 def test_eval_skeleton_refuses_a_recording_without_joints(tmp_path, capsys) -> None:
@@ -94,3 +102,42 @@ def test_eval_skeleton_refuses_a_recording_without_joints(tmp_path, capsys) -> N
     err = captured.err.strip()
     assert "no joint positions" in err and "optrack sim mocap" in err
     assert len(err.splitlines()) == 1
+
+
+def test_init_s_is_when_the_error_stays_under_0_1_m_for_half_a_second() -> None:
+    """Person 3 is off for 10 frames, under 0.1 m from frame 10 but for a blip at frame
+    20, then under it to the end: tracked at frame 21 (0.7 s at 30 Hz). Person 5 settles
+    at frame 4, but a wrist without an estimate at frame 6 counts as lost: frame 7.
+    Person 8 never settles."""
+    frames, rate = 60, 30.0
+    t = np.arange(frames) / rate + 2.0  # their first frame is at 2 s
+    first = np.full((frames, len(MARKERS)), 0.05)
+    first[:10] = 0.3
+    first[20, 0] = 0.3  # one marker 0.3 m: the frame's mean 0.11 m
+    second = np.full((20, len(MARKERS)), 0.02)
+    second[:4] = 0.5
+    second[6, 1] = np.nan
+    third = np.full((frames, len(MARKERS)), 0.15)
+    errors = np.concatenate([first, second, third])
+    people = np.repeat([3, 5, 8], [frames, 20, frames])
+    stamps = np.concatenate([t, t[:20] + 1.0, t])
+    times = initialisation_times(errors, people, stamps)
+    assert times == {
+        3: pytest.approx(21 / rate, abs=1e-4),
+        5: pytest.approx(7 / rate, abs=1e-4),
+        8: None,
+    }
+    figures = score_initialisation(times)
+    assert figures["init_s"] == {"3": times[3], "5": times[5], "8": None}
+    assert figures["init_s_median"] == pytest.approx(14 / rate, abs=1e-4)
+    assert figures["init_s_max"] == pytest.approx(21 / rate, abs=1e-4)
+    assert figures["init_within_1s"] == pytest.approx(2 / 3, abs=1e-4)  # the third never is
+
+
+def test_init_s_needs_the_whole_half_second_when_the_frames_go_on() -> None:
+    """Under 0.1 m for 0.4 s, then off again, then under to the end: the end counts."""
+    t = np.arange(40) / 30.0
+    errors = np.full((40, len(MARKERS)), 0.05)
+    errors[12] = 0.4  # frames 0-11 (0.37 s) good, then one bad frame
+    times = initialisation_times(errors, np.zeros(40, dtype=int), t)
+    assert times == {0: pytest.approx(13 / 30.0, abs=1e-4)}  # from frame 13 on to the end (0.87 s)
