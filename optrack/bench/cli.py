@@ -53,7 +53,7 @@ def cmd_bench_detection(args: argparse.Namespace) -> int:
     """Speed and accuracy of the people detector."""
     from optrack.bench.detection import detection_bench
 
-    result = detection_bench()
+    result = detection_bench(getattr(args, "pcl_binary", None))
     return _report(args, result, (f"  {key}: {value}" for key, value in result.items()))
 
 
@@ -186,5 +186,9 @@ def add_commands(commands: Any, command: Any) -> None:
     )
     p.add_argument(
         "--minutes", type=float, default=10.0, help="soak: how long the site runs (e.g. 0.5)"
+    )
+    p.add_argument(
+        "--pcl-binary",
+        help="detection: PCL's people_bench harness to time against, pinned to one core",
     )
     add_json(p)

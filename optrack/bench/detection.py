@@ -27,10 +27,14 @@ also counts other work.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import re
 import statistics
+import subprocess
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +45,7 @@ from optrack.bench.common import info, pin_to_one_core, shared_data
 from optrack.detection.ground import check_ground
 from optrack.detection.params import detection_params
 from optrack.detection.pipeline import PeopleDetector
+from optrack.errors import UserError
 from optrack.types import Intrinsics
 
 __all__ = [
@@ -48,6 +53,8 @@ __all__ = [
     "PCL_PEOPLE_XZ",
     "detection_bench",
     "match_people",
+    "parse_pcl_harness",
+    "pcl_comparison",
     "real_frame_figures",
 ]
 
@@ -65,10 +72,25 @@ SIM_SECONDS = 8.0
 DARK_LIGHTING = 0.02
 FPS_FRAMES = 90
 OPENPTRACK_KINECT_SAMPLING = 4
-#: The issue's targets.
+#: PCL's C++ detector on the same frame (../shared/bench/pcl_people): rounds of its
+#: harness and of this detector, alternately, on one core; timed frames per round.
+PCL_ROUNDS = 5
+PCL_ITERS = 30
+#: PCL's HOG+SVM people model, beside its test frames.
+PCL_SVM = "trainedLinearSVMForPeopleDetectionWithHOG.yaml"
+#: Where ``make -C build/pcl`` puts the harness, in the checkout.
+PCL_BINARY = Path("build") / "pcl" / "people_bench"
+PCL_BUILD = (
+    "PCL's harness is not built: as root, apt-get install libpcl-dev cmake g++ make "
+    "pkg-config, then cmake -S ../shared/bench/pcl_people -B build/pcl "
+    "-DCMAKE_BUILD_TYPE=Release && make -C build/pcl (see ../shared/bench/pcl_people/"
+    "README.md), and give it as --pcl-binary build/pcl/people_bench."
+)
+#: The issue's targets (``five_people_ratio_pcl`` and keys ending in _ms or _m: at most).
 TARGETS = {
     "five_people_ms": 44.0,
-    "kinect2_fps": 120.0,
+    "five_people_ratio_pcl": 0.6,
+    "kinect2_fps": 150.0,
     "crowd_recall": 0.9,
     "crowd_precision": 0.95,
     "occlusions_recall": 0.9,
@@ -104,6 +126,22 @@ def match_people(found_xz: np.ndarray, expected_xz: np.ndarray) -> tuple[int, fl
     return len(rows), float(cost[rows, cols].max())
 
 
+def _time_five_people(detector: PeopleDetector, five: Any, runs: int) -> tuple[list, list, Any]:
+    """Wall and CPU times (ms) of ``runs`` detections of the five_people frame with PCL's
+    floor (each run starts from it, as PCL's harness resets it), after a warm-up; and
+    the last run's batch."""
+    times, cpu_times = [], []
+    for run in range(WARM_UP + runs):
+        detector.ground.plane = check_ground(PCL_GROUND)  # every run starts from PCL's floor
+        started, cpu_started = time.perf_counter(), time.process_time()
+        batch = detector.process_cloud(five.points, PCL_INTRINSICS, five.colors)
+        elapsed = (time.perf_counter() - started) * 1000.0
+        if run >= WARM_UP:
+            times.append(elapsed)
+            cpu_times.append((time.process_time() - cpu_started) * 1000.0)
+    return times, cpu_times, batch
+
+
 def real_frame_figures(data: Path) -> dict[str, Any]:
     """The figures on PCL's real frames in ``data``/pcl (speed, people found, floor)."""
     from optrack.io.pcd import read_pcd
@@ -115,15 +153,7 @@ def real_frame_figures(data: Path) -> dict[str, Any]:
 
     # Speed: PCL's settings and floor, the frame in memory, as PCL's test.
     detector = PeopleDetector(detection_params("pcl"), ground=PCL_GROUND)
-    times, cpu_times = [], []
-    for run in range(WARM_UP + RUNS):
-        detector.ground.plane = check_ground(PCL_GROUND)  # every run starts from PCL's floor
-        started, cpu_started = time.perf_counter(), time.process_time()
-        batch = detector.process_cloud(five.points, PCL_INTRINSICS, five.colors)
-        elapsed = (time.perf_counter() - started) * 1000.0
-        if run >= WARM_UP:
-            times.append(elapsed)
-            cpu_times.append((time.process_time() - cpu_started) * 1000.0)
+    times, cpu_times, batch = _time_five_people(detector, five, RUNS)
     out["five_people_ms_cpu"] = statistics.median(cpu_times)
     out["five_people_ms"] = statistics.median(times)
     out["five_people_ms_min"] = min(times)
@@ -176,14 +206,103 @@ def _dark_mixed() -> Any:
     )
 
 
-def _pinned_fps(frames: list[Any], detector: PeopleDetector) -> dict[str, float]:
-    """Frames per second of ``detector.process`` on one core (wall clock and CPU time)."""
+@contextlib.contextmanager
+def _one_core() -> Iterator[int | None]:
+    """This process (and the processes it starts) on its idlest core, OpenCV on one
+    thread, OMP_NUM_THREADS=1 for children; all as before afterwards. (The detector's
+    numba kernels are single-threaded, and it hands BLAS no large product.)"""
     import cv2
 
     previous = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
     threads = cv2.getNumThreads()
+    omp = os.environ.get("OMP_NUM_THREADS")
     try:
-        pin_to_one_core()
+        os.environ["OMP_NUM_THREADS"] = "1"
+        yield pin_to_one_core()
+    finally:
+        if previous is not None:
+            os.sched_setaffinity(0, previous)
+        cv2.setNumThreads(threads)
+        if omp is None:
+            os.environ.pop("OMP_NUM_THREADS", None)
+        else:
+            os.environ["OMP_NUM_THREADS"] = omp
+
+
+def parse_pcl_harness(output: str) -> tuple[float, int]:
+    """PCL's harness's median ``compute()`` time (ms) and the people it found, from its
+    output (../shared/bench/pcl_people/people_bench.cpp)."""
+    timing = re.search(r"^compute\(\) \[full, with HOG\]:.*\bmedian=([0-9.]+)", output, re.M)
+    people = re.search(r"^people \(confidence > [-0-9.]+\): (\d+)", output, re.M)
+    if timing is None or people is None:
+        raise UserError(
+            "PCL's harness printed no 'compute() [full, with HOG]: ... median=' and "
+            "'people (confidence > ...): N' lines; is it ../shared/bench/pcl_people's people_bench?"
+        )
+    return float(timing.group(1)), int(people.group(1))
+
+
+def _run_pcl(binary: Path, pcd: Path, iters: int) -> tuple[float, int]:
+    """One run of PCL's harness on ``pcd`` (``--iters`` timed frames, ``--mode full``,
+    PCL's SVM beside ``pcd``)."""
+    svm = pcd.parent / PCL_SVM
+    command = [str(binary), str(pcd), "--iters", str(iters), "--mode", "full", "--svm", str(svm)]
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        raise UserError(f"PCL's harness {binary} failed (exit {done.returncode}): {last}")
+    return parse_pcl_harness(done.stdout)
+
+
+def pcl_comparison(
+    binary: Path | None, data: Path, rounds: int = PCL_ROUNDS, iters: int = PCL_ITERS
+) -> dict[str, Any]:
+    """PCL's C++ detector (its harness ``binary``) and this one on five_people.pcd with
+    PCL's settings, both on one core, in alternate rounds of ``iters`` timed frames
+    (wall clock, as the harness times): the medians over rounds of each round's
+    median, and of their ratio. Without the harness the figures are None and
+    ``pcl_comparison`` says how to build it."""
+    from optrack.io.pcd import read_pcd
+
+    keys = ("pcl_five_people_ms", "five_people_ms_pinned", "five_people_ratio_pcl")
+    out: dict[str, Any] = dict.fromkeys(keys)
+    if binary is None or not binary.is_file():
+        out["pcl_comparison"] = PCL_BUILD
+        return out
+    pcd = data / "pcl" / "five_people.pcd"
+    five = read_pcd(pcd)
+    detector = PeopleDetector(detection_params("pcl"), ground=PCL_GROUND)
+    pcl_ms, ours_ms, ours_cpu, ratios, people = [], [], [], [], []
+    with _one_core() as core:
+        for _ in range(rounds):
+            median, found = _run_pcl(binary, pcd, iters)
+            times, cpu_times, _ = _time_five_people(detector, five, iters)
+            pcl_ms.append(median)
+            people.append(found)
+            ours_ms.append(statistics.median(times))
+            ours_cpu.append(statistics.median(cpu_times))
+            ratios.append(ours_ms[-1] / median)
+    out.update(
+        {
+            "pcl_five_people_ms": statistics.median(pcl_ms),
+            "five_people_ms_pinned": statistics.median(ours_ms),
+            "five_people_ms_pinned_cpu": statistics.median(ours_cpu),
+            "five_people_ratio_pcl": statistics.median(ratios),
+            "pcl_five_people_ms_rounds": pcl_ms,
+            "five_people_ms_pinned_rounds": ours_ms,
+            "pcl_five_people_count": min(people),
+            "pcl_comparison": (
+                f"{rounds} alternate rounds of {iters} frames (PCL's harness {binary}, then "
+                f"this detector) on core {core}, OMP_NUM_THREADS=1; wall-clock medians"
+            ),
+        }
+    )
+    return out
+
+
+def _pinned_fps(frames: list[Any], detector: PeopleDetector) -> dict[str, float]:
+    """Frames per second of ``detector.process`` on one core (wall clock and CPU time)."""
+    with _one_core():
         for frame in frames[:WARM_UP]:
             detector.process(frame)
         wall, cpu = [], []
@@ -192,10 +311,6 @@ def _pinned_fps(frames: list[Any], detector: PeopleDetector) -> dict[str, float]
             detector.process(frame)
             wall.append(time.perf_counter() - started)
             cpu.append(time.process_time() - cpu_started)
-    finally:
-        if previous is not None:
-            os.sched_setaffinity(0, previous)
-        cv2.setNumThreads(threads)
     return {
         "kinect2_fps": 1.0 / statistics.median(wall),
         "kinect2_fps_cpu": 1.0 / max(statistics.median(cpu), 1e-9),
@@ -282,13 +397,32 @@ def _edge(work: Path) -> dict[str, Any]:
     return out
 
 
-def detection_bench() -> dict[str, Any]:
-    """The figures of ``optrack bench detection`` (see the module docstring)."""
+def _checkout() -> Path:
+    """The project's checkout (where build/ is)."""
+    import optrack
+
+    return Path(optrack.__file__).resolve().parent.parent
+
+
+def detection_bench(pcl_binary: str | Path | None = None) -> dict[str, Any]:
+    """The figures of ``optrack bench detection`` (see the module docstring); with
+    ``pcl_binary`` (PCL's harness; default build/pcl/people_bench where it is built),
+    the pinned comparison with PCL's detector (:func:`pcl_comparison`)."""
+    pcl_binary = Path(pcl_binary) if pcl_binary is not None else None
+    if pcl_binary is not None and not os.access(pcl_binary, os.X_OK):
+        raise UserError(f"{pcl_binary} is not an executable file: {PCL_BUILD}")
+    if pcl_binary is None and (_checkout() / PCL_BINARY).is_file():
+        pcl_binary = _checkout() / PCL_BINARY
     result: dict[str, Any] = {"five_people_ms": None, "kinect2_fps": None, "targets": TARGETS}
     data = shared_data()
     if (data / "pcl" / "five_people.pcd").is_file():
         info(f"bench detection: real frames from {data / 'pcl'} ({RUNS} timed runs)...")
         result.update(real_frame_figures(data))
+        if pcl_binary is not None:
+            info(
+                f"bench detection: PCL's detector and this one, {PCL_ROUNDS} rounds on one core..."
+            )
+        result.update(pcl_comparison(pcl_binary, data))
     else:
         info(f"bench detection: no real data at {data}; the real-frame figures are null.")
     with tempfile.TemporaryDirectory(prefix="optrack-bench-detection-") as work:
@@ -298,7 +432,7 @@ def detection_bench() -> dict[str, Any]:
         key: result.get(key) is not None
         and (
             result[key] <= target  # type: ignore[operator]
-            if key.endswith(("_ms", "_m"))
+            if key.endswith(("_ms", "_m", "_ratio_pcl"))
             else result[key] >= target  # type: ignore[operator]
         )
         for key, target in TARGETS.items()

@@ -1,8 +1,9 @@
 """Person candidates in the ground-plane frame (Munaro et al. 2012, sections 3.2-3.3).
 
 The floor-free voxels are grouped by Euclidean clustering (connected
-components of the graph joining points closer than a tolerance: SciPy's
-KD-tree and ``connected_components``); clusters that are too tall are
+components of the graph joining points closer than a tolerance:
+:func:`optrack.detection.kernels.cluster_labels`, as SciPy's KD-tree pairs and
+``connected_components``); clusters that are too tall are
 dropped, clusters whose heads are close on the floor are merged, and
 clusters holding several people are split at the maxima of their height
 profile (PCL's ``HeadBasedSubclustering`` and ``HeightMap2D``).
@@ -20,10 +21,8 @@ import math
 import cv2
 import numpy as np
 from scipy.signal import find_peaks
-from scipy.sparse import coo_matrix, csr_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
+from optrack.detection.kernels import cluster_labels, column_grid, ground_columns
 from optrack.params import Params
 
 __all__ = [
@@ -100,13 +99,7 @@ def euclidean_clusters(
     n = len(points)
     if n == 0:
         return []
-    pairs = cKDTree(points, balanced_tree=False, copy_data=False).query_pairs(
-        tolerance, output_type="ndarray"
-    )
-    # A float64 CSR graph is what connected_components works on: built directly, it
-    # skips SciPy's conversions (a third of the clustering's time on a Kinect v2 frame).
-    graph = csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
+    labels = cluster_labels(np.ascontiguousarray(points, dtype=np.float64), float(tolerance))
     counts = np.bincount(labels)
     kept = np.flatnonzero((counts >= min_points) & (counts <= max_points))
     if len(kept) == 0:
@@ -139,27 +132,45 @@ class TallColumns:
         max_height: float,
         tolerance: float,
     ) -> None:
+        inverse = 1.0 / cell
+        i = np.floor(x * inverse).astype(np.int64)
+        j = np.floor(y * inverse).astype(np.int64)
+        self._build(i, j, np.ascontiguousarray(z), cell, max_height, tolerance)
+
+    @classmethod
+    def from_camera(
+        cls, points: np.ndarray, g_T_c: np.ndarray, cell: float, max_height: float, tolerance: float
+    ) -> TallColumns:
+        """The columns of camera-frame points (Nx3 float32), ``g_T_c`` taking them to the
+        ground frame (in float32: only columns are told apart), in one pass."""
+        i, j, z = ground_columns(
+            np.ascontiguousarray(points, dtype=np.float32),
+            np.ascontiguousarray(g_T_c, dtype=np.float32),
+            np.float32(1.0 / cell),
+        )
+        columns = cls.__new__(cls)
+        columns._build(i, j, z, cell, max_height, tolerance)
+        return columns
+
+    def _build(
+        self,
+        i: np.ndarray,
+        j: np.ndarray,
+        z: np.ndarray,
+        cell: float,
+        max_height: float,
+        tolerance: float,
+    ) -> None:
+        """The grid from each point's column (``i``, ``j``) and height ``z``."""
         self.cell, self.tolerance = float(cell), float(tolerance)
-        z = np.ascontiguousarray(z)
-        high = z > max_height
-        self.found = bool(high.any())
+        self.found = bool(len(z)) and bool(z.max() > max_height)
         self.in_tall = np.zeros(len(z), dtype=bool)
         if not self.found:
             return
-        # Flat indices into a (rows x cols) grid of columns: 1-D arrays throughout (a
-        # strided Nx2 reduction or a 2-D ``ufunc.at`` costs several times more).
-        i = np.floor(x * (1.0 / cell)).astype(np.int64)
-        j = np.floor(y * (1.0 / cell)).astype(np.int64)
-        self.i0, self.j0 = int(i.min()), int(j.min())
-        i -= self.i0
-        j -= self.j0
-        self.rows, self.cols = int(i.max()) + 1, int(j.max()) + 1
-        column = i * self.cols + j
-        tall = np.zeros(self.rows * self.cols, dtype=bool)
-        tall[column[high]] = True
-        self.in_tall = tall[column]
-        bottom = np.full(len(tall), np.inf, dtype=z.dtype)  # lowest point of each tall column
-        np.minimum.at(bottom, column[self.in_tall], z[self.in_tall])  # same dtypes: fast path
+        column, self.in_tall, tall, bottom, i0, j0, rows, cols = column_grid(
+            i, j, z, float(max_height)
+        )
+        self.i0, self.j0, self.rows, self.cols = int(i0), int(j0), int(rows), int(cols)
         # The lowest point of any tall column within the tolerance: a minimum filter over
         # a square of columns (OpenCV's grey-scale erosion; beyond the grid nothing is tall).
         size = 2 * int(np.ceil(tolerance / cell)) + 1
@@ -207,15 +218,12 @@ def _merge_close(
     (PCL's ``mergeClustersCloseInFloorCoordinates``, taken transitively)."""
     if len(candidates) < 2 or distance <= 0:
         return candidates
-    heads = np.array([c.head for c in candidates])
-    pairs = cKDTree(heads).query_pairs(distance, output_type="ndarray")
-    if len(pairs) == 0:
+    heads = np.zeros((len(candidates), 3))
+    heads[:, :2] = [c.head for c in candidates]
+    labels = cluster_labels(heads, float(distance))
+    count = int(labels.max()) + 1
+    if count == len(candidates):
         return candidates
-    n = len(candidates)
-    graph = coo_matrix(
-        (np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n)
-    )
-    count, labels = connected_components(graph, directed=False)
     merged = []
     for label in range(count):
         members = np.flatnonzero(labels == label)

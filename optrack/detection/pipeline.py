@@ -311,13 +311,10 @@ class PeopleDetector:
             return person_candidates(_transform(g_T_c, foreground), p)
         # Walls and cupboards (tall columns, most of the points) are found on the
         # points and left out before the voxel grid, not voxelised and then dropped.
-        columns = TallColumns(
-            *_transform_xyz(g_T_c.astype(np.float32), points[:, 0], points[:, 1], points[:, 2]),
-            voxel,
-            float(p.max_height),
-            float(p.cluster_tolerance) * voxel,
+        columns = TallColumns.from_camera(
+            points, g_T_c, voxel, float(p.max_height), float(p.cluster_tolerance) * voxel
         )
-        foreground = voxel_grid(np.compress(~columns.in_tall, points, axis=0), voxel)
+        foreground = voxel_grid(points, voxel, skip=columns.in_tall)
         voxels = _transform(g_T_c, foreground)
         return person_candidates(voxels, p, touching=columns.near(voxels))
 

@@ -14,6 +14,7 @@ import functools
 import numpy as np
 import open3d as o3d
 
+from optrack.detection.kernels import split_stored, voxel_centroids
 from optrack.geometry import pixel_rays
 from optrack.types import Intrinsics, RGBDFrame
 
@@ -165,6 +166,12 @@ def split_at_floor(
     s = int(sampling_factor)
     if s < 1:
         raise ValueError(f"sampling_factor must be >= 1; got {sampling_factor}.")
+    if cloud.stored and (confidence is None or confidence_threshold <= 0):
+        points, floor_points = split_stored(
+            cloud._points, s, max_distance, np.asarray(plane, dtype=np.float64), floor_distance, top
+        )
+        step = max(1, len(floor_points) // fit_points)
+        return points, floor_points[::step], len(floor_points)
     if cloud.stored:
         points, _ = select_points(cloud, s, max_distance, confidence, confidence_threshold)
         a, b, c, d = (np.float32(v) for v in plane)
@@ -227,14 +234,15 @@ def _window_rays(
     return rays  # type: ignore[return-value]
 
 
-def voxel_grid(points: np.ndarray, voxel_size: float) -> np.ndarray:
-    """Centroid of the points in each occupied voxel (Open3D's voxel grid), Mx3 float64."""
-    if len(points) == 0:
-        return np.empty((0, 3))
-    cloud = o3d.geometry.PointCloud(
-        o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
-    )
-    return np.asarray(cloud.voxel_down_sample(float(voxel_size)).points)
+def voxel_grid(points: np.ndarray, voxel_size: float, skip: np.ndarray | None = None) -> np.ndarray:
+    """Centroid of the points (but those ``skip`` marks) in each occupied voxel (Open3D's
+    voxels, in the order of each voxel's first point:
+    :func:`~optrack.detection.kernels.voxel_centroids`), Mx3 float64."""
+    if points.dtype not in (np.float32, np.float64):
+        points = points.astype(np.float64)
+    if skip is not None and not len(points):
+        skip = None
+    return voxel_centroids(np.ascontiguousarray(points).reshape(-1, 3), float(voxel_size), skip)
 
 
 def denoise(points: np.ndarray, mean_k: int, std_dev: float) -> np.ndarray:
