@@ -156,16 +156,46 @@ def _close_later(sensor: OpenNISensor, after_s: float) -> tuple[threading.Thread
     return closer, started
 
 
-def test_close_from_another_thread_ends_a_blocked_read_within_a_second():
+def _waiting_in(thread_id: int, function: str) -> bool:
+    """Whether the thread ``thread_id`` is inside ``function`` now (its stack)."""
+    frame = sys._current_frames().get(thread_id)
+    while frame is not None:
+        if frame.f_code.co_name == function:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _close_when_waiting(sensor: OpenNISensor) -> tuple[threading.Thread, list[float]]:
+    """Close the sensor from another thread once this thread waits for a frame inside the
+    sensor (``_grab``, OpenNI2's wait); the list gets the close's start."""
+    reader, started = threading.get_ident(), []
+
+    def close() -> None:
+        deadline = time.monotonic() + 10.0
+        while not _waiting_in(reader, "_grab") and time.monotonic() < deadline:
+            time.sleep(0.002)
+        started.append(time.monotonic())
+        sensor.close()
+
+    closer = threading.Thread(target=close, daemon=True)
+    closer.start()
+    return closer, started
+
+
+# Twenty times in a row, in the suite (it once hung inside OpenNI2's wait there).
+@pytest.mark.parametrize("attempt", range(20))
+def test_close_from_another_thread_ends_a_blocked_read_within_a_second(attempt):
     params = OPENNI_PARAMS.create({"color": False, "read_timeout": 5.0})
     sensor = OpenNISensor("Dummy", params)
     sensor.read()
     sensor._streams["depth"].stream.stop()  # no frame comes any more: the read waits
-    closer, started = _close_later(sensor, 0.3)
+    closer, started = _close_when_waiting(sensor)
     assert sensor.read() is None
     ended = time.monotonic()
     closer.join(timeout=5.0)
-    assert not closer.is_alive()
+    assert not closer.is_alive()  # no hang in close()
+    assert started, "the read never waited for a frame"
     assert ended - started[0] < 1.0
     assert not sensor.is_open
     assert sensor.read() is None  # closed stays closed: no reopening behind the closer's back
