@@ -18,6 +18,7 @@ import numba
 import numpy as np
 
 from optrack.params import Params
+from optrack.skeleton.kernels import score_particles
 from optrack.skeleton.likelihood import associate, signed_distance, sorted_points
 from optrack.skeleton.model import (
     FRAMES,
@@ -32,7 +33,6 @@ from optrack.skeleton.model import (
     part_reach,
 )
 from optrack.skeleton.params import SKELETON_PARAMS
-from optrack.skeleton.score import score_particles
 
 __all__ = [
     "PARTITION_FRAMES",
@@ -244,10 +244,9 @@ class SkeletonFilter:
                 points = points[self.rng.choice(len(points), keep, replace=False)]
             return points, None
         base = forward_kinematics(self.estimate, self.shape)
-        done = list(PARTITIONS).index(partition)
-        fixed = np.array(
-            [k for k, part in enumerate(PARTS) if part.partition in list(PARTITIONS)[:done]]
-        )
+        # Every other partition's parts, at the estimate: a limb does not take the points
+        # another limb holds (searched first, the left arm took the right arm's points).
+        fixed = np.array([k for k, part in enumerate(PARTS) if part.partition != partition])
         body = part_geometry(base[0][None], base[1][None], self.shape)
         distance = np.abs(signed_distance(points, body)[0][0])  # (N, K)
         baseline = np.minimum(distance[:, fixed].min(axis=1), float(p.alpha))

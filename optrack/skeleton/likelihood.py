@@ -127,52 +127,68 @@ def _bucket(value: float, grid, buckets: int) -> int:
 
 
 @numba.njit(fastmath=True, inline="always")
+def _part_run(qx, qy, qz, qb, qa, g, near, far):
+    """Eq. 7-8 for one part, geometry row ``g``, on a run of points (views): each point's
+    best distance to the parts so far and its area of interest (``near`` or ``far``)."""
+    ax, ay, az, ux, uy, uz = g[0], g[1], g[2], g[3], g[4], g[5]
+    ex, ey, ez, fx, fy, fz = g[6], g[7], g[8], g[9], g[10], g[11]
+    s0, s1, r0, dr, inv_length = g[12], g[13], g[14], g[15], g[16]
+    half = np.float32(0.5) / inv_length
+    for i in range(qx.shape[0]):  # no branches: it vectorises
+        vx, vy, vz = qx[i] - ax, qy[i] - ay, qz[i] - az
+        s = vx * ux + vy * uy + vz * uz
+        e = vx * ex + vy * ey + vz * ez
+        f = vx * fx + vy * fy + vz * fz
+        o = max(max(s0 - s, s - s1), np.float32(0.0))
+        r = r0 + dr * min(max(s * inv_length, np.float32(0.0)), np.float32(1.0))
+        d = abs(np.sqrt(e * e + f * f + o * o) / r - np.float32(1.0))
+        better = d < qb[i]
+        qb[i] = d if better else qb[i]
+        qa[i] = (far if s >= half else near) if better else qa[i]
+
+
+@numba.njit(fastmath=True, inline="always")
 def likelihood_pose(
-    px, py, pz, axis, starts, grid, baseline, geometry, expected, consts, best, area, counts
-):
+    px, py, pz, axis, starts, grid, baseline, geometry, expected, consts, best, area, runs
+):  # fmt: skip
     """Eq. 9 for one pose, geometry (K, G), of a cloud from :func:`sorted_points`
     (sorted along ``axis``): each part visits only the run of points that can lie within
-    alpha of it. consts: 1 / (2 sigma^2), alpha, support_weight. Inlined where it is
-    called, where its arrays are known apart: so its distance loop vectorises."""
-    inv_two_sigma2, alpha, weight = consts[0], np.float32(consts[1]), consts[2]
+    alpha of it, and its areas of interest count their points in that run only (a
+    point outside it is not the part's); every sum is a loop without branches. consts:
+    1 / (2 sigma^2), alpha, support_weight; scratch: best, area (N,), runs (2 K,).
+    Inlined where it is called, where its arrays are known apart: so its loops
+    vectorise."""
+    alpha = np.float32(consts[1])
     n = px.shape[0]
     best[:] = baseline
     area[:] = -1
     for k in range(geometry.shape[0]):
         g = geometry[k]
-        ax, ay, az, ux, uy, uz = g[0], g[1], g[2], g[3], g[4], g[5]
-        ex, ey, ez, fx, fy, fz = g[6], g[7], g[8], g[9], g[10], g[11]
-        s0, s1, r0, dr, inv_length = g[12], g[13], g[14], g[15], g[16]
-        half = np.float32(0.5) / inv_length
-        near, far = np.int32(2 * k), np.int32(2 * k + 1)
-        low, high = _extent(g, axis, (1.0 + consts[1]) * max(r0, r0 + dr))
+        low, high = _extent(g, axis, (1.0 + consts[1]) * max(g[14], g[14] + g[15]))
         # Whole blocks of W from 0 on views: no remainder, no wraparound; it vectorises.
         lo = starts[_bucket(low, grid, starts.shape[0] - 1)] // W * W
         hi = min(-(-starts[_bucket(high, grid, starts.shape[0] - 1) + 1] // W) * W, n)
-        qx, qy, qz, qb, qa = px[lo:hi], py[lo:hi], pz[lo:hi], best[lo:hi], area[lo:hi]
-        for i in range(hi - lo):  # no branches
-            vx, vy, vz = qx[i] - ax, qy[i] - ay, qz[i] - az
-            s = vx * ux + vy * uy + vz * uz
-            e = vx * ex + vy * ey + vz * ez
-            f = vx * fx + vy * fy + vz * fz
-            o = max(max(s0 - s, s - s1), np.float32(0.0))
-            r = r0 + dr * min(max(s * inv_length, np.float32(0.0)), np.float32(1.0))
-            d = abs(np.sqrt(e * e + f * f + o * o) / r - np.float32(1.0))
-            better = d < qb[i]
-            qb[i] = d if better else qb[i]
-            qa[i] = (far if s >= half else near) if better else qa[i]
+        runs[2 * k], runs[2 * k + 1] = lo, hi
+        near, far = np.int32(2 * k), np.int32(2 * k + 1)
+        _part_run(px[lo:hi], py[lo:hi], pz[lo:hi], best[lo:hi], area[lo:hi], g, near, far)
     total = 0.0
-    counts[:] = 0.0
     for i in range(n):
-        b = min(best[i], alpha)
-        total += b * b
-        if area[i] >= 0 and best[i] < alpha:
-            counts[area[i]] += 1.0
+        d = min(best[i], alpha)
+        total += d * d
     deficit = 0.0
-    for j in range(counts.shape[0]):
-        if expected[j] > 0.0:
-            deficit += max(0.0, 1.0 - counts[j] / expected[j])
-    return -total * inv_two_sigma2 / max(n, 1) - weight * deficit
+    for k in range(geometry.shape[0]):
+        lo, hi = int(runs[2 * k]), int(runs[2 * k + 1])
+        qb, qa = best[lo:hi], area[lo:hi]
+        near, far = 0, 0
+        for i in range(hi - lo):
+            explained = qb[i] < alpha
+            near += explained & (qa[i] == 2 * k)
+            far += explained & (qa[i] == 2 * k + 1)
+        if expected[2 * k] > 0.0:
+            deficit += max(0.0, 1.0 - near / expected[2 * k])
+        if expected[2 * k + 1] > 0.0:
+            deficit += max(0.0, 1.0 - far / expected[2 * k + 1])
+    return -total * consts[0] / max(n, 1) - consts[2] * deficit
 
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
@@ -180,11 +196,11 @@ def _kernel(px, py, pz, axis, starts, grid, baseline, geometry, expected, consts
     n, chunks = geometry.shape[0], min(geometry.shape[0], 64)
     for c in numba.prange(chunks):  # scratch once per chunk of poses
         best, area = np.empty_like(baseline), np.empty(baseline.shape[0], dtype=np.int32)
-        counts = np.empty(2 * geometry.shape[1])
+        runs = np.empty(2 * geometry.shape[1])
         for p in range(c * n // chunks, (c + 1) * n // chunks):
             out[p] = likelihood_pose(
                 px, py, pz, axis, starts, grid, baseline, geometry[p], expected, consts, best,
-                area, counts,
+                area, runs,
             )  # fmt: skip
 
 
