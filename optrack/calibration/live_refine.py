@@ -88,7 +88,8 @@ def walk_trajectories(
         if sid not in base.sensors:
             continue
         frames = ((m.batch.stamp, m.batch.detections) for m in messages)
-        trajectory, _ = walker_trajectory(frames, base.pose(sid))
+        # the live walk's confidence floor: no partly seen body, no false detection
+        trajectory, _ = walker_trajectory(frames, base.pose(sid), min_confidence=None)
         if trajectory is not None:
             trajectories[sid] = trajectory
     return trajectories

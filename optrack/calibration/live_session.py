@@ -389,9 +389,12 @@ class LiveSession:
         return {sid: trajectory.xyz for sid, trajectory in trajectories.items()}
 
     def _samples(self) -> dict[str, int]:
-        """Detections of the walker collected per sensor (frames with someone in them)."""
+        """Detections of the walker collected per sensor (frames with someone in them that
+        the refinement uses: refinement.usable_detections)."""
+        from optrack.calibration.refinement import usable_detections
+
         return {
-            sid: sum(1 for m in batches if m.batch.detections)
+            sid: sum(1 for m in batches if usable_detections(m.batch.detections))
             for sid, batches in self._detections.items()
         }
 

@@ -36,6 +36,7 @@ time.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
@@ -54,6 +55,7 @@ __all__ = [
     "average_trajectory",
     "person_trajectories",
     "refine_from_trajectories",
+    "usable_detections",
     "walker_trajectory",
 ]
 
@@ -117,6 +119,17 @@ REFINEMENT_PARAMS = register(
                 max=1000,
                 step=1,
                 help="ICP iterations per round.",
+            ),
+            Param(
+                "min_confidence",
+                -1.0,
+                min=-10.0,
+                max=10.0,
+                help="The live calibration's walk (the wizard, calibrate live) leaves out "
+                "detections below this confidence: a body partly hidden or cut off by the "
+                "image's border, whose centroid lies off its axis, or no person at all (in the "
+                "wizard's simulated walks they put two sensors' trajectories 10-45 cm apart; "
+                "without them 2-4 cm).",
             ),
             Param(
                 "min_detections",
@@ -398,20 +411,32 @@ def alignment_error(
     return float(np.mean(np.concatenate(distances)))
 
 
+def usable_detections(detections: Sequence[Any], min_confidence: float | None = None) -> list[Any]:
+    """The detections a refinement uses: with a camera-frame centroid (``camera_xyz``) and
+    a confidence of at least ``min_confidence`` (None: calibration_refinement's
+    ``min_confidence``, the live walk's floor)."""
+    if min_confidence is None:
+        min_confidence = float(REFINEMENT_PARAMS.defaults()["min_confidence"])
+    return [d for d in detections if d.camera_xyz is not None and d.confidence >= min_confidence]
+
+
 def walker_trajectory(
-    frames: Iterable[tuple[float, Sequence[Any]]], world_T_camera: np.ndarray
+    frames: Iterable[tuple[float, Sequence[Any]]],
+    world_T_camera: np.ndarray,
+    min_confidence: float | None = -math.inf,
 ) -> tuple[Trajectory | None, int]:
     """One sensor's detections of the one person walking as a trajectory in the world:
-    for each frame ``(time, detections)``, the most confident detection that has a
-    camera-frame centroid (``camera_xyz``), moved by ``world_T_camera``. Returns the
-    trajectory (None when the person was never detected) and how many frames had more
-    than one person."""
+    for each frame ``(time, detections)``, the most confident of its
+    :func:`usable_detections` (``min_confidence``: every one by default; None: the live
+    walk's floor), its camera-frame centroid moved by
+    ``world_T_camera``. Returns the trajectory (None when the person was never detected)
+    and how many frames had more than one person."""
     pose = np.asarray(world_T_camera, dtype=np.float64)
     times: list[float] = []
     points: list[np.ndarray] = []
     crowded = 0
     for t, detections in frames:
-        found = [d for d in detections if d.camera_xyz is not None]
+        found = usable_detections(detections, min_confidence)
         crowded += len(found) > 1
         if not found:
             continue

@@ -105,3 +105,30 @@ def test_alignment_error_is_the_mean_distance_between_sensors_at_the_same_time()
     shifted = {"a": Trajectory(t, path), "b": Trajectory(t, path + [0.0, 0.05, 0.02])}
     assert alignment_error(shifted) == pytest.approx(0.05)
     assert alignment_error(shifted, planar=False) == pytest.approx(np.hypot(0.05, 0.02))
+
+
+def test_the_walkers_trajectory_leaves_out_detections_below_the_confidence_floor():
+    """A body partly hidden or cut off by the image's border (its centroid off its axis)
+    and false detections come with low confidence: below calibration_refinement's
+    min_confidence they are not part of the live walk's trajectory, nor of its count."""
+    from optrack.calibration.refinement import usable_detections, walker_trajectory
+    from optrack.types import Detection
+
+    floor = REFINEMENT_PARAMS.defaults()["min_confidence"]
+
+    def seen(x, confidence):
+        return Detection(x, 0.0, 0.8, 1.7, confidence, camera_xyz=(x, 0.0, 0.8))
+
+    frames = [
+        (0.0, [seen(0.0, 1.2)]),
+        (0.1, [seen(3.0, floor - 0.5)]),  # a false detection, 3 m off
+        (0.2, [seen(0.2, floor + 0.1), seen(2.0, floor - 1.0)]),
+        (0.3, [Detection(0.0, 0.0, 0.8, 1.7, 2.0)]),  # no camera-frame centroid
+    ]
+    trajectory, crowded = walker_trajectory(frames, np.eye(4), min_confidence=None)
+    assert trajectory.t.tolist() == [0.0, 0.2]
+    assert np.allclose(trajectory.xyz[:, 0], [0.0, 0.2]) and crowded == 0
+    assert [len(usable_detections(d)) for _, d in frames] == [1, 0, 1, 0]
+    # A recording's refinement (optrack calibrate refine) keeps every detection.
+    everything, crowded = walker_trajectory(frames, np.eye(4))
+    assert everything.t.tolist() == [0.0, 0.1, 0.2] and crowded == 1

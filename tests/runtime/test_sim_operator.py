@@ -13,7 +13,7 @@ from optrack.net.bus import Bus
 from optrack.runtime.config import NODE_PARAMS
 from optrack.runtime.node import CommandError, Node, send_command
 from optrack.runtime.site_params import SITE_PARAMS
-from optrack.sim.operator import SceneSwitch, SimulatedOperator
+from optrack.sim.operator import OperatorError, SceneSwitch, SimulatedOperator
 from optrack.sim.sensor import SimulatedSensor
 from optrack.sim.world import Simulation
 
@@ -169,6 +169,30 @@ def test_the_extrinsics_scene_holds_the_board_only_where_two_sensors_see_it(tmp_
     steps = simulation.operator.steps
     assert steps and all(s.kind == "hold" and len(s.sensors) == 2 for s in steps)
     assert np.allclose(simulation.operator.start_point, steps[0].operator_spot)
+    # Each pair at two places (the extrinsics page asks every sensor for two shared board
+    # poses), sim_board.place_spacing apart.
+    spacing = simulation.board.params.place_spacing
+    for pair in {s.sensors for s in steps}:
+        places = [s.world_T_board[:3, 3] for s in steps if s.sensors == pair]
+        assert len(places) == 2 and np.linalg.norm(places[0] - places[1]) >= spacing - 0.01
+    # The site status says when every placement is made (the wizard's backend asks the
+    # operator to go round again after it while a sensor needs more).
+    deadline = time.monotonic() + 30
+    while not operator.status_values()["operator.until"] and time.monotonic() < deadline:
+        time.sleep(0.05)
+    until = float(operator.status_values()["operator.until"])
+    assert until > time.time() + 5 * len(steps)  # at least the 5 s holds
+    longer = operator.command({"action": "move_board", "pairs": True, "hold": 9.0, **BOARD})
+    deadline = time.monotonic() + 30
+    while (
+        operator.status_values()["operator.scene"] != longer["scene"]
+        or not (operator.status_values()["operator.until"])
+    ):
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    assert float(operator.status_values()["operator.until"]) > until + 3.5 * len(steps)
+    with pytest.raises(OperatorError, match="0 to 60 s"):
+        operator.command({"action": "move_board", "pairs": True, "hold": 90, **BOARD})
 
 
 def _site_config(folder, name: str, sensors: str) -> str:
