@@ -259,23 +259,22 @@ class BoardSuggestion:
                     "show it the board again together with a calibrated camera, at another "
                     "place than before (no such place was found from the cameras' poses)."
                 )
-            x, y, height = (float(c) for c in self.center)
-            return head + (
-                f"stand at about ({x:.1f}, {y:.1f}) with the board's centre {height:.1f} m "
-                f"high, facing {' and '.join((self.sensor, *self.partners))} (the green area "
-                "in the views)."
-            )
+            return head + self._place()
         if not self.found:
             return (
                 f"No place was found where {self.sensor} and a calibrated camera both see "
                 "the board whole: move or turn a camera so that their views overlap, or "
                 "use a larger board."
             )
+        return f"For {self.sensor}: {self._place()}"
+
+    def _place(self) -> str:
+        """Where to stand and how to hold the board (the end of the sentence)."""
         x, y, height = (float(c) for c in self.center)
         return (
-            f"For {self.sensor}: stand at about ({x:.1f}, {y:.1f}) with the board's centre "
-            f"{height:.1f} m high, facing {' and '.join((self.sensor, *self.partners))} "
-            "(the green area in the views)."
+            f"stand at about ({x:.1f}, {y:.1f}) with the board's centre {height:.1f} m high, "
+            f"facing {' and '.join((self.sensor, *self.partners))} (the green area in the "
+            "views)."
         )
 
 
