@@ -33,6 +33,7 @@ __all__ = [
     "facing_candidates",
     "height_from_cloud",
     "initialise",
+    "initialise_facing",
     "pose_log_likelihood",
     "search_limb",
 ]
@@ -108,8 +109,8 @@ def pose_log_likelihood(filt: SkeletonFilter, points: np.ndarray, state: np.ndar
     )
 
 
-def _from_heading(filt: SkeletonFilter, points: np.ndarray, heading: float) -> np.ndarray:
-    """Coarse to fine from one heading guess; returns the estimate."""
+def initialise_facing(filt: SkeletonFilter, points: np.ndarray, heading: float) -> np.ndarray:
+    """Coarse to fine from one heading guess (radians); returns the estimate."""
     p = filt.params
     layers = int(p.init_layers)
     centre = np.median(points[:, :2], axis=0)
@@ -147,7 +148,7 @@ def initialise(filt: SkeletonFilter, points: np.ndarray) -> np.ndarray:
     best_state, best_score = None, -np.inf
     headings, sure = facing_candidates(points, filt.shape)
     for heading in headings[:1] if sure else headings:
-        state = _from_heading(filt, points, heading)
+        state = initialise_facing(filt, points, heading)
         score = pose_log_likelihood(filt, points, state)
         if score > best_score:
             best_state, best_score = state, score

@@ -212,6 +212,36 @@ SKELETON_PARAMS = register(
                 "their points is searched again as initialisation does (0: never).",
             ),
             Param(
+                "limb_research_s",
+                1.0,
+                min=0.0,
+                max=10.0,
+                step=0.1,
+                unit="s",
+                help="For this long after the skeleton (re)initialises, one limb a frame, in "
+                "turn, is searched again as initialisation does, kept where it explains the "
+                "cloud better (0: never).",
+            ),
+            Param(
+                "facing_speed",
+                0.5,
+                min=0.0,
+                max=5.0,
+                step=0.1,
+                unit="m/s",
+                help="A person moving faster than this for facing_frames frames, against where "
+                "the skeleton faces, is initialised again facing the motion (0: never).",
+            ),
+            Param(
+                "facing_frames",
+                5,
+                min=1,
+                max=100,
+                step=1,
+                help="Frames in a row of moving against the skeleton's facing before it is "
+                "initialised again facing the motion.",
+            ),
+            Param(
                 "max_dt",
                 0.2,
                 min=0.01,

@@ -37,6 +37,7 @@ from optrack.skeleton.init import (
     LIMBS,
     height_from_cloud,
     initialise,
+    initialise_facing,
     pose_log_likelihood,
     search_limb,
 )
@@ -97,6 +98,9 @@ class SkeletonTracker:
         self.filter: SkeletonFilter | None = None
         self.state: State = "initialising"
         self._stamp: float | None = None
+        self._started = -np.inf  # when the skeleton last initialised
+        self._turn = 0  # the next limb searched again after initialisation
+        self._backwards = 0  # frames in a row moving against where the pelvis faces
         self._misses = 0
 
     def update(self, points_world: np.ndarray, stamp: float) -> SkeletonEstimate:
@@ -110,10 +114,13 @@ class SkeletonTracker:
         self._stamp = float(stamp)
         if self.filter is None or self.state == "lost":
             self._start(points)
+            self._started = float(stamp)
         else:
             self.filter.step(points, dt)
+        if self.state == "tracking" and self._face_the_motion(points):
+            self._started = float(stamp)
         explained, support = self.filter.fit(points)
-        if self.state == "tracking" and self._search_lost_limbs(points, support):
+        if self._search_limbs(points, support, float(stamp)):
             explained, support = self.filter.fit(points)
         if explained < float(p.lost_fraction):
             return self._miss(float(stamp), explained)
@@ -126,16 +133,52 @@ class SkeletonTracker:
         self._advance_shape()
         return self._estimate(float(stamp), explained, support)
 
-    def _search_lost_limbs(self, points: np.ndarray, support: np.ndarray) -> bool:
-        """Search again, as initialisation does, each limb one of whose bones (upper arm,
-        forearm, thigh, shin) holds under ``limb_lost_support`` of the points its areas of
-        interest should hold; keep the new pose where the whole
-        body's likelihood rose. Returns whether a limb moved."""
-        threshold = float(self.params.limb_lost_support)
+    def _face_the_motion(self, points: np.ndarray) -> bool:
+        """Front and back: a person who moves over the floor faster than ``facing_speed``
+        for ``facing_frames`` frames in a row, more than 120 degrees away from where the
+        pelvis faces, is walking backwards or, far more often, was initialised facing
+        backwards (left and right swapped), which tracking does not undo: initialise
+        again facing the motion. Returns whether it did."""
+        filt, p = self.filter, self.params
+        velocity = filt.velocity[:2]
+        speed = float(np.hypot(*velocity))
+        facing = np.array([np.cos(filt.estimate[3]), np.sin(filt.estimate[3])])
+        if (
+            float(p.facing_speed) <= 0.0
+            or speed < float(p.facing_speed)
+            or (velocity @ facing > -0.5 * speed)
+        ):
+            self._backwards = 0
+            return False
+        self._backwards += 1
+        if self._backwards < int(p.facing_frames):
+            return False
+        self._backwards = 0
+        kept = filt.velocity.copy()
+        filt.reset(initialise_facing(filt, points, float(np.arctan2(velocity[1], velocity[0]))))
+        filt.velocity = kept
+        return True
+
+    def _search_limbs(self, points: np.ndarray, support: np.ndarray, stamp: float) -> bool:
+        """Search limbs again, as initialisation does: for ``limb_research_s`` after the
+        skeleton started, one limb a frame in turn (a limb hidden at the first frame, or
+        lying on points it does not own, is found once the data show it); once tracking,
+        each limb one of whose bones (upper arm, forearm, thigh, shin) holds under
+        ``limb_lost_support`` of the points its areas of interest should hold. A new pose
+        is kept where the whole body's likelihood rose. Returns whether a limb moved."""
+        chosen = []
+        if stamp - self._started < float(self.params.limb_research_s):
+            chosen.append(LIMBS[self._turn % len(LIMBS)])
+            self._turn += 1
+        if self.state == "tracking":
+            threshold = float(self.params.limb_lost_support)
+            chosen += [
+                limb
+                for limb in LIMBS
+                if limb not in chosen and support[_LIMB_PARTS[limb]].mean(axis=1).min() < threshold
+            ]
         moved = False
-        for limb in LIMBS:
-            if support[_LIMB_PARTS[limb]].mean(axis=1).min() >= threshold:
-                continue
+        for limb in chosen:
             filt = self.filter
             before = filt.estimate.copy()
             score = pose_log_likelihood(filt, points, before)

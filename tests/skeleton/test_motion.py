@@ -1,6 +1,7 @@
 """The motion model: the root's velocity carried over (momentum) lets the filter follow a
 person who walks and turns fast, from their own clouds; a limb that lost its points
-searches wider (limb_search)."""
+searches wider (limb_search) or is searched again (limb_lost_support, limb_research_s);
+a skeleton facing backwards turns to face the motion (facing_speed)."""
 
 from __future__ import annotations
 
@@ -77,11 +78,17 @@ def test_a_limb_without_support_diffuses_wider():
     assert np.array_equal(filt._widened(spread, "torso"), spread)
 
 
-def _raise_the_arm(lost_support: float) -> float:
-    """Left wrist error (m) after a tracked person's left arm jumps overhead in one frame."""
+def _raise_the_arm(lost_support: float, research_s: float = 0.0) -> float:
+    """Left wrist error (m) after a tracked person's left arm jumps overhead in one frame
+    (the fourth, 0.1 s after the skeleton started)."""
     rng = np.random.default_rng(7)
     params = SKELETON_PARAMS.create(
-        {"limb_lost_support": lost_support, "shape_seconds": 0.0, "particles": 1000}
+        {
+            "limb_lost_support": lost_support,
+            "limb_research_s": research_s,
+            "shape_seconds": 0.0,
+            "particles": 1000,
+        }
     )
     tracker = SkeletonTracker(params, SHAPE, seed=3)
     pose = _pose(SHAPE)
@@ -99,3 +106,33 @@ def _raise_the_arm(lost_support: float) -> float:
 def test_a_lost_limb_is_searched_again():
     assert _raise_the_arm(0.3) < 0.08
     assert _raise_the_arm(0.0) > 0.2  # without the search the arm stays where it was
+
+
+def test_limbs_are_searched_again_in_turn_after_initialisation():
+    assert _raise_the_arm(0.0, research_s=1.0) < 0.08
+
+
+def _walk_backwards_start(facing_speed: float) -> float:
+    """How far (rad) the pelvis's heading is from the truth after 20 frames of a person
+    walking forward at 1.2 m/s whose skeleton was started facing backwards."""
+    rng = np.random.default_rng(8)
+    params = SKELETON_PARAMS.create(
+        {"facing_speed": facing_speed, "limb_research_s": 0.0, "shape_seconds": 0.0}
+    )
+    tracker = SkeletonTracker(params, SHAPE, seed=4)
+    start = _pose(SHAPE)
+    start[3] = 0.0  # facing +x, walking along it
+    tracker.update(seen_cloud(start, SHAPE, rng), 0.0)
+    backwards = start.copy()
+    backwards[3] = np.pi
+    tracker.filter.reset(backwards)
+    for k in range(1, 21):
+        truth = start.copy()
+        truth[0] += 1.2 * k / 30
+        estimate = tracker.update(seen_cloud(truth, SHAPE, rng), k / 30)
+    return float(abs(np.angle(np.exp(1j * estimate.pose[3]))))
+
+
+def test_a_skeleton_facing_backwards_turns_to_face_the_motion():
+    assert _walk_backwards_start(0.5) < 0.5
+    assert _walk_backwards_start(0.0) > 2.0  # without it, it walks on backwards
