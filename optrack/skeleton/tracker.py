@@ -6,11 +6,16 @@ joints of optrack/skeleton/joints.py, a confidence per joint, and a state:
 
 - ``initialising``: no pose yet, or one that explains less than
   ``track_fraction`` of the cloud; the first frame runs the coarse-to-fine
-  search (optrack/skeleton/init.py), the next ones refine it as tracking does;
+  search (optrack/skeleton/init.py), the next ones refine it as tracking does
+  and, for ``limb_research_s``, search one limb again a frame, in turn;
 - ``tracking``: the estimate explains at least ``track_fraction``;
 - ``lost``: the likelihood collapsed (under ``lost_fraction`` explained, or
   fewer than ``min_points`` points) for ``lost_frames`` frames in a row; the
   next frame with enough points initialises again.
+
+While tracking, a skeleton moving over the floor against where it faces
+(``facing_speed``) initialises again facing the motion: it was started facing
+backwards, left and right swapped.
 
 A joint's confidence is the support of the areas of interest next to it
 (how many of the points they should hold they hold, capped at 1), times the
