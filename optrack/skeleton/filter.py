@@ -18,8 +18,8 @@ import numba
 import numpy as np
 
 from optrack.params import Params
-from optrack.skeleton.kernels import score_particles
-from optrack.skeleton.likelihood import associate, signed_distance, sorted_points
+from optrack.skeleton.kernels import part_distances, score_particles, segment_distances
+from optrack.skeleton.likelihood import associate, sorted_points
 from optrack.skeleton.model import (
     FRAMES,
     LIMITS,
@@ -106,12 +106,40 @@ def annealing_exponent(log_weights: np.ndarray, survival_rate: float) -> float:
 
 
 def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Indices of a systematic resampling of normalised weights."""
-    n = len(weights)
-    positions = (rng.random() + np.arange(n)) / n
+    """Indices of a systematic resampling of normalised weights: the particle whose
+    cumulative weight first reaches each of n positions (u + i) / n, u uniform in [0, 1)."""
+    return _systematic(np.asarray(weights, dtype=np.float64), rng.random())
+
+
+@numba.njit(cache=True)
+def _systematic(weights: np.ndarray, offset: float) -> np.ndarray:
+    n = weights.shape[0]
     cumulative = np.cumsum(weights)
     cumulative[-1] = 1.0
-    return np.searchsorted(cumulative, positions)
+    chosen = np.empty(n, dtype=np.int64)
+    j = 0
+    for i in range(n):  # the positions ascend: one pass (numpy's searchsorted, left side)
+        position = (offset + i) / n
+        while cumulative[j] < position:
+            j += 1
+        chosen[i] = j
+    return chosen
+
+
+@numba.njit(cache=True)
+def _take_and_diffuse(particles, idx, chosen, noise, sd, low, high):
+    """In place: the columns ``idx`` of the particles ``chosen``, then (where ``noise``
+    (P, len(idx)) has rows) plus noise times ``sd``, clipped to [low, high]."""
+    taken = np.empty((chosen.shape[0], idx.shape[0]))
+    for i in range(chosen.shape[0]):
+        for j in range(idx.shape[0]):
+            taken[i, j] = particles[chosen[i], idx[j]]
+    for i in range(chosen.shape[0]):
+        for j in range(idx.shape[0]):
+            value = taken[i, j]
+            if noise.shape[0]:
+                value = min(max(value + noise[i, j] * sd[j], low[j]), high[j])
+            particles[i, idx[j]] = value
 
 
 def _weighted_mean(values: np.ndarray, weights: np.ndarray, dims: tuple[int, ...]) -> np.ndarray:
@@ -226,11 +254,10 @@ class SkeletonFilter:
                 best = np.exp(sharp * (ll - ll.max()))
                 self.estimate[idx] = _weighted_mean(self.particles[:, idx], best / best.sum(), dims)
             chosen = systematic_resample(w, self.rng)
-            self.particles[:, idx] = self.particles[np.ix_(chosen, idx)]
-            if layer < layers - 1:
-                sd = spread[idx] * float(p.anneal_decay) ** (layer + 1)
-                moved = self.particles[:, idx] + self.rng.normal(size=(len(chosen), len(idx))) * sd
-                self.particles[:, idx] = np.clip(moved, LIMITS[idx, 0], LIMITS[idx, 1])
+            sd = spread[idx] * float(p.anneal_decay) ** (layer + 1)
+            rows = len(chosen) if layer < layers - 1 else 0  # the last layer: no diffusion
+            noise = self.rng.normal(size=(rows, len(idx)))
+            _take_and_diffuse(self.particles, idx, chosen, noise, sd, *LIMITS[idx].T)
         if partition == "torso" and _YAW in dims:  # keep yaws next to their mean
             delta = self.particles[:, _YAW] - self.estimate[_YAW]
             self.particles[:, _YAW] = self.estimate[_YAW] + np.angle(np.exp(1j * delta))
@@ -248,11 +275,11 @@ class SkeletonFilter:
         # another limb holds (searched first, the left arm took the right arm's points).
         fixed = np.array([k for k, part in enumerate(PARTS) if part.partition != partition])
         body = part_geometry(base[0][None], base[1][None], self.shape)
-        distance = np.abs(signed_distance(points, body)[0][0])  # (N, K)
+        distance = part_distances(points, body[0])  # (N, K)
         baseline = np.minimum(distance[:, fixed].min(axis=1), float(p.alpha))
         parts = PARTITION_PARTS[partition]
         if gate:  # near where the limb was, or explained by no part of the estimate
-            near = _segment_distance(points, body[0, parts]).min(axis=1) < float(p.limb_gate)
+            near = segment_distances(points, body[0, parts]).min(axis=1) < float(p.limb_gate)
             near |= distance.min(axis=1) >= float(p.alpha)
         else:
             reach = part_reach(self.shape, parts) + float(p.reach_margin)
@@ -275,14 +302,6 @@ class SkeletonFilter:
         if state is self.estimate:
             self.support = support
         return float(np.mean(area >= 0)) if len(area) else 0.0, support
-
-
-def _segment_distance(points: np.ndarray, geometry: np.ndarray) -> np.ndarray:
-    """Distance (m) of each point to each part's axis segment, (N, K); geometry (K, G)."""
-    g = np.asarray(geometry, dtype=np.float64)
-    v = points[:, None, :] - g[None, :, 0:3]
-    s = np.clip(np.sum(v * g[None, :, 3:6], axis=2), g[:, 12], g[:, 13])
-    return np.linalg.norm(v - s[..., None] * g[None, :, 3:6], axis=2)
 
 
 def _clamp(state: np.ndarray) -> np.ndarray:

@@ -24,6 +24,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import msgspec
+import numba
 import numpy as np
 
 from optrack.geometry import backproject_points, invert, project, transform_points
@@ -38,6 +39,7 @@ __all__ = [
     "nearest_frames",
     "person_cloud",
     "person_mask",
+    "person_points",
     "person_roi",
     "world_points",
 ]
@@ -300,10 +302,112 @@ def person_cloud(
 ) -> np.ndarray:
     """One person's decimated cloud (K, 3) from each sensor's frame at one instant
     (``poses``: each sensor's ``world_T_camera``), backprojecting only their rectangle."""
-    clouds = []
+    parts = []
     for sid, frame in frames.items():
         roi = person_roi(frame.intrinsics, frame.shape, poses[sid], xy, height, params)
-        if roi is not None:
-            stride, jump = int(params.stride), float(params.edge_jump)
-            clouds.append(world_points(frame, poses[sid], stride, roi, jump))
-    return fuse_person(clouds, xy, height, params, rng, others)
+        if roi is None:
+            continue
+        if frame.intrinsics.has_distortion or frame.depth.dtype not in (np.uint16, np.float32):
+            cloud = world_points(
+                frame, poses[sid], int(params.stride), roi, float(params.edge_jump)
+            )
+            parts.append(cloud[person_mask(cloud, xy, height, params, others)])
+        else:
+            parts.append(person_points(frame, poses[sid], roi, xy, height, params, others))
+    merged = np.concatenate(parts) if parts else np.empty((0, 3))
+    return decimate(merged, float(params.voxel), int(params.points), rng)
+
+
+def person_points(
+    frame: RGBDFrame,
+    world_T_camera: np.ndarray,
+    roi: Roi,
+    xy: Sequence[float],
+    height: float,
+    params: Params,
+    others: np.ndarray | Sequence[Sequence[float]] = (),
+) -> np.ndarray:
+    """The person's world points (M, 3) float32 from one frame without lens distortion
+    (uint16 or float32 depth): :func:`world_points` (``params``' stride and edge jump)
+    then :func:`person_mask`, in one pass over the rectangle that keeps only the
+    person's points (the same points, in the same order, to the bit)."""
+    u0, v0, u1, v1 = roi
+    i = frame.intrinsics
+    scale = frame.depth_scale if frame.depth.dtype == np.uint16 else 1.0
+    pose = np.asarray(world_T_camera, dtype=np.float32)
+    # Each bound as numpy compares it with float32 points: rounded to float32 first.
+    bounds = np.array(
+        [
+            float(xy[0]),
+            float(xy[1]),
+            float(params.radius) ** 2,
+            float(params.floor_margin),
+            float(height) + float(params.head_margin),
+            float(params.edge_jump),
+            scale,
+        ],
+        dtype=np.float32,
+    )
+    rays = np.array([i.cx - u0, i.cy - v0, i.fx, i.fy])
+    return _person_points(
+        frame.depth[v0:v1, u0:u1], int(params.stride), rays, pose, bounds,
+        np.asarray(others, dtype=np.float64).reshape(-1, 2),
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _metres(depth, scale, jump):
+    """The rectangle in metres (float32), 0 where invalid or (jump > 0) on an edge."""
+    rows, cols = depth.shape
+    z = np.empty((rows, cols), dtype=np.float32)
+    for r in range(rows):
+        for c in range(cols):
+            z[r, c] = np.float32(depth[r, c]) * scale
+    if jump <= 0.0:
+        return z
+    out = np.empty_like(z)
+    for r in range(rows):
+        for c in range(cols):
+            d = z[r, c]
+            bad = not d > 0
+            if r > 0:
+                bad |= not abs(d - z[r - 1, c]) <= jump
+            if r + 1 < rows:
+                bad |= not abs(z[r + 1, c] - d) <= jump
+            if c > 0:
+                bad |= not abs(d - z[r, c - 1]) <= jump
+            if c + 1 < cols:
+                bad |= not abs(z[r, c + 1] - d) <= jump
+            out[r, c] = np.float32(0.0) if bad else d
+    return out
+
+
+@numba.njit(cache=True)
+def _person_points(depth, stride, rays, pose, bounds, others):
+    z = _metres(depth, bounds[6], bounds[5])
+    rows, cols = z.shape
+    out = np.empty(
+        (((rows + stride - 1) // stride) * ((cols + stride - 1) // stride), 3), np.float32
+    )
+    count = 0
+    for r in range(0, rows, stride):
+        for c in range(0, cols, stride):
+            if not z[r, c] > 0:
+                continue
+            depth_m = np.float64(z[r, c])
+            x = np.float32((c - rays[0]) * depth_m / rays[2])
+            y = np.float32((r - rays[1]) * depth_m / rays[3])
+            zf = z[r, c]
+            wx = x * pose[0, 0] + y * pose[0, 1] + zf * pose[0, 2] + pose[0, 3]
+            wy = x * pose[1, 0] + y * pose[1, 1] + zf * pose[1, 2] + pose[1, 3]
+            wz = x * pose[2, 0] + y * pose[2, 1] + zf * pose[2, 2] + pose[2, 3]
+            dx, dy = wx - bounds[0], wy - bounds[1]
+            near2 = dx * dx + dy * dy
+            keep = near2 <= bounds[2] and wz >= bounds[3] and wz <= bounds[4]
+            for o in range(others.shape[0]):  # nearer another person: theirs
+                ex, ey = np.float64(wx) - others[o, 0], np.float64(wy) - others[o, 1]
+                keep = keep and np.float64(near2) <= ex * ex + ey * ey
+            if keep:
+                out[count, 0], out[count, 1], out[count, 2] = wx, wy, wz
+                count += 1
+    return out[:count]

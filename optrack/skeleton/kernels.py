@@ -32,7 +32,7 @@ from optrack.skeleton.model import (
     forward_kinematics,
 )
 
-__all__ = ["score_particles"]
+__all__ = ["part_distances", "score_particles", "segment_distances"]
 
 LANES = 32  # poses whose kinematics and geometry are computed together (vector lanes)
 
@@ -200,4 +200,37 @@ def score_particles(
         *cloud, np.asarray(expected, dtype=np.float64).reshape(-1),
         np.array([1.0 / (2.0 * sigma * sigma), alpha, weight]), out,
     )  # fmt: skip
+    return out
+
+
+@numba.njit(cache=True)
+def part_distances(points: np.ndarray, geometry: np.ndarray) -> np.ndarray:
+    """|d| of eq. 7 of each point (N, 3) to each part of one pose, geometry (K, G): (N, K),
+    as :func:`~optrack.skeleton.likelihood.signed_distance` computes it (float64)."""
+    out = np.empty((points.shape[0], geometry.shape[0]))
+    for k in range(geometry.shape[0]):
+        g = geometry[k].astype(np.float64)
+        for n in range(points.shape[0]):
+            v0, v1, v2 = points[n, 0] - g[0], points[n, 1] - g[1], points[n, 2] - g[2]
+            s = v0 * g[3] + v1 * g[4] + v2 * g[5]
+            e = v0 * g[6] + v1 * g[7] + v2 * g[8]
+            f = v0 * g[9] + v1 * g[10] + v2 * g[11]
+            over = max(max(g[12] - s, s - g[13]), 0.0)
+            r = g[14] + g[15] * min(max(s * g[16], 0.0), 1.0)
+            out[n, k] = abs(np.sqrt(e * e + f * f + over * over) / r - 1.0)
+    return out
+
+
+@numba.njit(cache=True)
+def segment_distances(points: np.ndarray, geometry: np.ndarray) -> np.ndarray:
+    """Distance (m) of each point (N, 3) to each part's axis segment (from s0 to s1 along
+    it), geometry (K, G) of one pose: (N, K)."""
+    out = np.empty((points.shape[0], geometry.shape[0]))
+    for k in range(geometry.shape[0]):
+        g = geometry[k].astype(np.float64)
+        for n in range(points.shape[0]):
+            v0, v1, v2 = points[n, 0] - g[0], points[n, 1] - g[1], points[n, 2] - g[2]
+            s = min(max(v0 * g[3] + v1 * g[4] + v2 * g[5], g[12]), g[13])
+            w0, w1, w2 = v0 - s * g[3], v1 - s * g[4], v2 - s * g[5]
+            out[n, k] = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
     return out
