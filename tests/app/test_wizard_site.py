@@ -382,7 +382,8 @@ def test_the_wizard_calibrates_the_simulated_site_from_page_1_to_finish(qtbot, w
     assert errors.max_rotation_error_deg <= rotation_deg, errors.as_dict()
     # The floor is the world's z = 0: each camera's height as the truth has it.
     for name, pose in truth.items():
-        assert abs(saved.sensors[name].pose[2, 3] - pose[2, 3]) < position_m
+        height = saved.sensors[name].pose[2, 3]
+        assert abs(height - pose[2, 3]) < position_m, (name, height, pose[2, 3])
 
 
 def test_the_calibration_menu_opens_the_wizard_which_says_when_there_is_no_site(qtbot):
