@@ -67,6 +67,9 @@ def _areas_of_joints() -> list[list[tuple[int, int]]]:
 
 
 _JOINT_AREAS = _areas_of_joints()
+# Turning faster than this (rad/s), a person's path swings ahead of their heading (a
+# runner's U-turn put it 130 degrees away): the facing is not checked.
+_FACING_TURN = 1.0
 # The parts whose support tells whether a limb is lost: its bones (the feet, cut by the
 # fusion's floor margin, hold few points even when found).
 _LIMB_PARTS = {
@@ -141,7 +144,7 @@ class SkeletonTracker:
     def _face_the_motion(self, points: np.ndarray) -> bool:
         """Front and back: a person who moves over the floor faster than ``facing_speed``
         for ``facing_frames`` frames in a row, more than 120 degrees away from where the
-        pelvis faces, is walking backwards or, far more often, was initialised facing
+        pelvis faces and not turning, is walking backwards or, far more often, was initialised facing
         backwards (left and right swapped), which tracking does not undo: initialise
         again facing the motion. Returns whether it did."""
         filt, p = self.filter, self.params
@@ -151,6 +154,7 @@ class SkeletonTracker:
         if (
             float(p.facing_speed) <= 0.0
             or speed < float(p.facing_speed)
+            or abs(filt.velocity[2]) > _FACING_TURN  # turning: the path swings ahead
             or (velocity @ facing > -0.5 * speed)
         ):
             self._backwards = 0
@@ -159,10 +163,13 @@ class SkeletonTracker:
         if self._backwards < int(p.facing_frames):
             return False
         self._backwards = 0
-        kept = filt.velocity.copy()
-        filt.reset(initialise_facing(filt, points, float(np.arctan2(velocity[1], velocity[0]))))
+        before, kept = filt.estimate.copy(), filt.velocity.copy()
+        turned = initialise_facing(filt, points, float(np.arctan2(velocity[1], velocity[0])))
+        if pose_log_likelihood(filt, points, turned) < pose_log_likelihood(filt, points, before):
+            turned = before  # the data say otherwise: a pelvis's heading wrongly estimated
+        filt.reset(turned)
         filt.velocity = kept
-        return True
+        return turned is not before
 
     def _search_limbs(self, points: np.ndarray, support: np.ndarray, stamp: float) -> bool:
         """Search limbs again, as initialisation does: for ``limb_research_s`` after the
