@@ -21,7 +21,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from optrack.skeleton.likelihood import likelihood_pose, set_threads
+from optrack.skeleton.likelihood import likelihood_within, set_threads
 from optrack.skeleton.model import (
     FK_TABLES,
     FRAMES,
@@ -120,6 +120,31 @@ def _geometry_lanes(pts, rot, parts, tables, radii, out):
             row[16, lane] = 1.0 / length
 
 
+@numba.njit(fastmath=True, inline="always")
+def _extents_lanes(geometry, axis, widen, out):
+    """:func:`~optrack.skeleton.likelihood._extent` of each part of a few poses at once:
+    geometry (K, G, lanes); out (2 K, lanes): each part's low and high along ``axis``
+    (its reach: ``widen`` times its largest radius)."""
+    for k in range(geometry.shape[0]):
+        g = geometry[k]
+        for lane in range(geometry.shape[2]):
+            ux, uy, uz = g[3, lane], g[4, lane], g[5, lane]
+            ex, ey, ez = g[6, lane], g[7, lane], g[8, lane]
+            side = uy * ez - uz * ey
+            if axis == 1:
+                side = uz * ex - ux * ez
+            elif axis == 2:
+                side = ux * ey - uy * ex
+            fx, fy, fz = g[9, lane], g[10, lane], g[11, lane]
+            aspect = 1.0 / np.sqrt(fx * fx + fy * fy + fz * fz)
+            u, e = g[3 + axis, lane], g[6 + axis, lane]
+            reach = widen * max(g[14, lane], g[14, lane] + g[15, lane])
+            half = reach * np.sqrt(u * u + e * e + (aspect * side) ** 2) * 1.001 + 1e-4
+            start, end = g[axis, lane] + g[12, lane] * u, g[axis, lane] + g[13, lane] * u
+            out[2 * k, lane] = min(start, end) - half
+            out[2 * k + 1, lane] = max(start, end) + half
+
+
 @numba.njit(parallel=True, fastmath=True, cache=True)
 def _score_kernel(
     particles, estimate, dims, cos_p, sin_p, cos_e, sin_e, base_rot, base_pts, offsets, frames_on,
@@ -152,11 +177,14 @@ def _score_kernel(
         geometry = np.empty((parts.shape[0], G, lanes), dtype=np.float32)
         _geometry_lanes(pts, rot, parts, part_tables, radii, geometry)
         best, area = np.empty_like(base), np.empty(base.shape[0], dtype=np.int32)
+        extents = np.empty((2 * parts.shape[0], lanes), dtype=np.float32)
+        _extents_lanes(geometry, axis, 1.0 + consts[1], extents)
         runs = np.empty(2 * parts.shape[0])
         pose = np.empty((parts.shape[0], G), dtype=np.float32)  # one pose's, contiguous
         for lane in range(lanes):
             pose[:, :] = geometry[:, :, lane]
-            out[first + lane] = likelihood_pose(
+            runs[:] = extents[:, lane]
+            out[first + lane] = likelihood_within(
                 px, py, pz, axis, starts, grid, base, pose, expected, consts, best, area, runs
             )
 

@@ -158,13 +158,29 @@ def likelihood_pose(
     1 / (2 sigma^2), alpha, support_weight; scratch: best, area (N,), runs (2 K,).
     Inlined where it is called, where its arrays are known apart: so its loops
     vectorise."""
+    for k in range(geometry.shape[0]):
+        g = geometry[k]
+        reach = (1.0 + consts[1]) * max(g[14], g[14] + g[15])
+        runs[2 * k], runs[2 * k + 1] = _extent(g, axis, reach)
+    return likelihood_within(
+        px, py, pz, axis, starts, grid, baseline, geometry, expected, consts, best, area, runs
+    )
+
+
+@numba.njit(fastmath=True, inline="always")
+def likelihood_within(
+    px, py, pz, axis, starts, grid, baseline, geometry, expected, consts, best, area, runs
+):  # fmt: skip
+    """:func:`likelihood_pose` given each part's interval along ``axis`` outside which
+    every point is at least alpha from it (``runs``: low, high of each part; the part's
+    run of points replaces them)."""
     alpha = np.float32(consts[1])
     n = px.shape[0]
     best[:] = baseline
     area[:] = -1
     for k in range(geometry.shape[0]):
         g = geometry[k]
-        low, high = _extent(g, axis, (1.0 + consts[1]) * max(g[14], g[14] + g[15]))
+        low, high = runs[2 * k], runs[2 * k + 1]
         # Whole blocks of W from 0 on views: no remainder, no wraparound; it vectorises.
         lo = starts[_bucket(low, grid, starts.shape[0] - 1)] // W * W
         hi = min(-(-starts[_bucket(high, grid, starts.shape[0] - 1) + 1] // W) * W, n)
