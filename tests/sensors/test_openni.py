@@ -32,12 +32,31 @@ def dummy():
     sensor.close()
 
 
+#: Attempts at an undisturbed stretch of frames: a reader starved of CPU on a loaded
+#: machine misses frames (the device numbers them: ``dropped``); one such stretch is
+#: enough, every stretch must keep the device's clock.
+ATTEMPTS = 10
+
+
+def _stretch(sensor: OpenNISensor, count: int) -> tuple[list, float, int]:
+    """``count`` frames read one after another, their arrival time (s) and the frames the
+    device numbered but this reader missed meanwhile."""
+    dropped = sensor.dropped
+    started = time.monotonic()
+    frames = [sensor.read() for _ in range(count)]
+    return frames, time.monotonic() - started, sensor.dropped - dropped
+
+
 def test_dummy_frames_arrive_at_30_fps_with_the_right_shapes(dummy):
     dummy.read()  # the first frame may have waited for the device to start
-    started = time.monotonic()
-    frames = [dummy.read() for _ in range(45)]
-    fps = 45 / (time.monotonic() - started)
-    assert 25 <= fps <= 36
+    rates = []
+    for _ in range(ATTEMPTS):
+        frames, seconds, missed = _stretch(dummy, 45)
+        rates.append(45 / seconds)
+        assert rates[-1] <= 36  # never faster than the device
+        if missed == 0 and rates[-1] >= 25:
+            break
+    assert 25 <= rates[-1] <= 36, f"arrival rates {rates} (fps) with frames missed each time"
     for frame in frames:
         assert frame.depth.shape == (240, 320) and frame.depth.dtype == np.uint16
         assert frame.color.shape == (240, 320, 3) and frame.color.dtype == np.uint8
@@ -46,11 +65,18 @@ def test_dummy_frames_arrive_at_30_fps_with_the_right_shapes(dummy):
 
 
 def test_dummy_timestamps_are_monotonic_and_one_frame_apart(dummy):
-    stamps = np.array([dummy.read().timestamp for _ in range(20)])
-    steps = np.diff(stamps)
-    assert np.all(steps > 0)
-    np.testing.assert_allclose(steps, 1 / 30, atol=2e-3)  # the device clock, not arrival jitter
-    assert abs(time.time() - stamps[-1]) < 1.0  # anchored to the host clock
+    for _ in range(ATTEMPTS):
+        frames, _, missed = _stretch(dummy, 20)
+        steps = np.diff([frame.timestamp for frame in frames])
+        assert np.all(steps > 0)
+        # the device clock, not arrival jitter: whole frame periods (one, unless missed)
+        periods = steps * 30
+        np.testing.assert_allclose(periods, np.round(periods), atol=2e-3 * 30)
+        if missed == 0:
+            break
+    assert missed == 0, "every stretch of 20 frames missed some"
+    np.testing.assert_allclose(steps, 1 / 30, atol=2e-3)
+    assert abs(time.time() - frames[-1].timestamp) < 1.0  # anchored to the host clock
 
 
 def test_dummy_depth_shows_the_moving_disc(dummy):
@@ -62,9 +88,13 @@ def test_dummy_depth_shows_the_moving_disc(dummy):
 
 
 def test_dummy_sequence_numbers_count_frames_without_drops(dummy):
-    seqs = [dummy.read().seq for _ in range(5)]
-    assert seqs == list(range(seqs[0], seqs[0] + 5))
-    assert dummy.dropped == 0
+    for _ in range(ATTEMPTS):
+        frames, _, missed = _stretch(dummy, 5)
+        seqs = [frame.seq for frame in frames]
+        assert seqs == list(range(seqs[0], seqs[0] + 5))  # read frames: no gap ever
+        if missed == 0:
+            break
+    assert missed == 0, "every stretch of 5 frames missed some"
 
 
 def test_dummy_info_describes_mode_and_nominal_intrinsics(dummy):
