@@ -80,41 +80,25 @@ def motion_spread(params: Params, dt: float) -> np.ndarray:
 
 @numba.njit(cache=True, fastmath=True)
 def _exponent(centred: np.ndarray, target: float) -> float:
-    """Newton's method on log10(beta) for ESS(beta) = target, kept inside a bracket that
-    each step narrows (bisection where Newton would leave it), from the Gaussian guess:
-    a few passes over the weights instead of bisection's 16; to 1e-6 decades."""
-    low, high = -6.0, 8.0  # log10 of beta; ESS falls as beta grows
-    # Start where a Gaussian spread of log-weights would put it: ESS/N = exp(-(beta sd)^2).
-    n = len(centred)
-    sd = np.sqrt(max(np.var(centred), 1e-300))
-    u = min(max(np.log10(np.sqrt(-np.log(min(max(target / n, 1e-9), 0.999))) / sd), low), high)
-    for _ in range(40):
-        beta = 10.0**u
-        s1, s2, d1, d2 = 0.0, 0.0, 0.0, 0.0
+    low, high = -6.0, 8.0  # log10 of beta, found to 14 / 2^16 decades
+    for _ in range(16):
+        mid = 0.5 * (low + high)
+        beta = 10.0**mid
+        total, squares = 0.0, 0.0
         for value in centred:
             w = np.exp(beta * value)
-            s1 += w
-            s2 += w * w
-            d1 += value * w
-            d2 += 2.0 * value * w * w
-        excess = s1 * s1 / s2 - target
-        if excess > 0.0:
-            low = u
+            total += w
+            squares += w * w
+        if total * total / squares > target:
+            low = mid
         else:
-            high = u
-        slope = (2.0 * s1 * d1 * s2 - s1 * s1 * d2) / (s2 * s2) * beta * np.log(10.0)
-        step = -excess / slope if slope < 0.0 else 0.0
-        if step == 0.0 or not low < u + step < high:
-            step = 0.5 * (low + high) - u
-        u += step
-        if abs(step) < 1e-6 or high - low < 1e-6:
-            break
-    return 10.0**u
+            high = mid
+    return 10.0**low
 
 
 def annealing_exponent(log_weights: np.ndarray, survival_rate: float) -> float:
     """The exponent beta for which the weights exp(beta * log_weights) keep an effective
-    sample size of ``survival_rate`` times the particle count."""
+    sample size of ``survival_rate`` times the particle count (bisection in log beta)."""
     centred = np.asarray(log_weights, dtype=np.float64) - np.max(log_weights)
     if not np.any(centred < -1e-12):
         return 1.0
