@@ -118,7 +118,8 @@ def test_calibration_scenario_mixes_four_models_and_the_sr4500_shares_views_and_
     sr = models.index("sr4500")
     held = [s.sensors for s in sim.operator.steps if s.kind == "hold"]
     floor = [s.sensors for s in sim.operator.steps if s.kind == "floor"]
-    assert sum(1 for h in held if len(h) == 2 and sr in h) == 2  # both neighbours
+    pairs = [tuple(sorted(h)) for h in held if len(h) == 2 and sr in h]
+    assert len(pairs) == 4 and len(set(pairs)) == 2  # both neighbours, at two places each
     assert sum(1 for f in floor if sr in f) >= 2  # the floor plane, not one board
     assert all(any(k in f for f in floor) for k in range(6))
 
