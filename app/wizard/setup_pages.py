@@ -320,7 +320,9 @@ class IntrinsicsPage(WizardPage):
                 live.coverage,
                 caption=f"{sensor}: {views_text(live.views)}",
             )
-            self._rows()
+        # Every snapshot: a result the backend has is shown at once, even when this poll
+        # comes before the calibrating job's own callback.
+        self._rows()
 
     def update_buttons(self) -> None:
         idle = not self.busy
