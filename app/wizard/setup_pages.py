@@ -3,6 +3,7 @@ one sensor's intrinsics (2, optional)."""
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 from PySide6.QtWidgets import (
@@ -189,7 +190,8 @@ class IntrinsicsPage(WizardPage):
             "2. Intrinsics (optional)",
             "Only for a sensor whose own intrinsics are poor. Pick it, start the capture and "
             "show the board all over its image, near and far, tilted: the green cells fill where "
-            "corners were seen. Then calibrate. Next without calibrating keeps the sensors' own "
+            "corners were seen, and the line below says where the board is still missing until "
+            "the lens is good. Then calibrate. Next without calibrating keeps the sensors' own "
             "intrinsics.",
         )
         row = QHBoxLayout()
@@ -227,6 +229,8 @@ class IntrinsicsPage(WizardPage):
         self.sensor.currentTextChanged.connect(lambda _: self.update_buttons())
         self.capturing: str | None = None
         self.views_seen: dict[str, int] = {}
+        # the lens from the views so far, per sensor (the backend's check while capturing)
+        self.lens_seen: dict[str, IntrinsicsResult] = {}
 
     @property
     def results(self) -> dict[str, IntrinsicsResult]:
@@ -256,6 +260,7 @@ class IntrinsicsPage(WizardPage):
         live = self.calibration_wizard.live
         self.capturing = sensor
         self.tile.sensor = sensor
+        self.lens_seen.pop(sensor, None)  # the capture starts from no views
         self.run(
             "Starting the intrinsics capture",
             lambda progress: live.start("intrinsics", sensor),
@@ -284,13 +289,25 @@ class IntrinsicsPage(WizardPage):
             sentence=f"Calibrating the intrinsics of {sensor}…",
         )
 
+    def lens_good(self, sensor: str) -> bool:
+        """Whether the views captured for ``sensor`` pin its lens down (the backend's check,
+        calibration_intrinsics.good_std_px)."""
+        lens = self.lens_seen.get(sensor)
+        return lens is not None and lens.good
+
     def _calibrated(self, sensor: str, result: IntrinsicsResult) -> None:
         self.calibration_wizard.poll()  # the backend's state has the result now
         k = result.intrinsics
         self.views.setText(
             f"{sensor}: fx {k.fx:.1f}, fy {k.fy:.1f}, cx {k.cx:.1f}, cy {k.cy:.1f} px; "
             f"RMS {result.rms:.2f} px over {len(result.used)} views "
-            f"({len(result.rejected)} rejected)."
+            f"({len(result.rejected)} rejected). "
+            + (
+                result.advice(sensor)
+                if result.good
+                else f"Not good yet: {result.advice(sensor)} Start the capture again with "
+                "more views, or Next uses this lens anyway."
+            )
         )
         self._rows()
 
@@ -302,7 +319,8 @@ class IntrinsicsPage(WizardPage):
                 "views": str(self.views_seen.get(sensor, "")),
                 "intrinsics": "the sensor's own"
                 if result is None
-                else f"calibrated, RMS {result.rms:.2f} px",
+                else f"calibrated, {'good' if result.good else 'not good yet'} "
+                f"(±{result.uncertainty_px:.2f} px), RMS {result.rms:.2f} px",
             }
         fair, good = self.calibration_wizard.view_thresholds("intrinsics")
         levels = {s: count_level(self.views_seen.get(s, 0), fair, good) for s in rows}
@@ -314,11 +332,22 @@ class IntrinsicsPage(WizardPage):
         live = state.sensors.get(sensor)
         if state.phase == "intrinsics" and live is not None:
             self.views_seen[sensor] = live.views
+            lens = ""
+            if live.lens is not None:
+                self.lens_seen[sensor] = live.lens
+                known = live.lens.uncertainty_px
+                lens = (
+                    ", lens good"
+                    if live.lens.good
+                    else f", lens known to {known:.1f} px"
+                    if math.isfinite(known)
+                    else ", lens not known yet"
+                )
             self.tile.set_view(
                 live.image,
                 live.board_seen,
                 live.coverage,
-                caption=f"{sensor}: {views_text(live.views)}",
+                caption=f"{sensor}: {views_text(live.views)}{lens}",
             )
         # Every snapshot: a result the backend has is shown at once, even when this poll
         # comes before the calibrating job's own callback.

@@ -8,6 +8,7 @@ camera is calibrated again without them.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,6 +30,8 @@ from optrack.types import Intrinsics
 
 __all__ = [
     "INTRINSICS_PARAMS",
+    "REGIONS",
+    "TURNS",
     "IntrinsicsResult",
     "calibrate_intrinsics",
     "corners_from_images",
@@ -78,6 +81,28 @@ INTRINSICS_PARAMS = register(
                 help="...and above this many pixels (good views are never rejected).",
             ),
             Param(
+                "good_std_px",
+                0.5,
+                min=0.01,
+                max=50.0,
+                step=0.05,
+                unit="px",
+                help="The lens counts as good once its focal lengths and image centre are each "
+                "pinned down to this many pixels (one standard deviation, from how well the "
+                "views agree); until then the intrinsics page asks for more views and says "
+                "where.",
+            ),
+            Param(
+                "tilt_deg",
+                20.0,
+                min=1.0,
+                max=80.0,
+                step=1.0,
+                unit="deg",
+                help="A view counts as turned (left, right) or tilted (up, down) when the "
+                "board's face is this far from looking straight at the camera.",
+            ),
+            Param(
                 "max_rejection_rounds",
                 3,
                 min=0,
@@ -95,9 +120,22 @@ class IntrinsicsError(UserError):
     """Intrinsics that cannot be computed from the given views."""
 
 
+#: The image's regions the intrinsics page names when it asks for the board somewhere
+#: (rows top to bottom, as the camera sees it).
+REGIONS = (
+    ("top-left corner", "top edge", "top-right corner"),
+    ("left edge", "centre", "right edge"),
+    ("bottom-left corner", "bottom edge", "bottom-right corner"),
+)
+#: The ways a view is turned, as the camera sees the board's face.
+TURNS = ("turned left", "turned right", "tilted up", "tilted down")
+
+
 @dataclasses.dataclass
 class IntrinsicsResult:
-    """Intrinsics, reprojection RMS (px) over the kept views, and what was kept."""
+    """Intrinsics, reprojection RMS (px) over the kept views, and what was kept; how well
+    the views pin the lens down (OpenCV's standard deviations of fx, fy, cx, cy) and
+    where the kept views put the board (corners per image region, views per turn)."""
 
     intrinsics: Intrinsics
     rms: float
@@ -105,6 +143,42 @@ class IntrinsicsResult:
     used: list[int]  # indices of kept views in the input
     rejected: list[int]  # indices of rejected views
     coverage: CoverageMap
+    std_px: tuple[float, float, float, float] = (math.nan,) * 4  # fx, fy, cx, cy
+    wanted_std_px: float = 0.5  # calibration_intrinsics.good_std_px when it was made
+    regions: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((3, 3), int))
+    turns: tuple[int, ...] = (0,) * len(TURNS)  # kept views turned each way of TURNS
+
+    @property
+    def uncertainty_px(self) -> float:
+        """The largest standard deviation of fx, fy, cx, cy (px; inf when unknown)."""
+        values = [v for v in self.std_px if math.isfinite(v)]
+        return max(values) if len(values) == len(self.std_px) else math.inf
+
+    @property
+    def good(self) -> bool:
+        """Whether the views pin the lens down to ``wanted_std_px`` (the lens is good)."""
+        return self.uncertainty_px <= self.wanted_std_px
+
+    def advice(self, sensor: str) -> str:
+        """One sentence for the operator: the lens is good, or where to show the board
+        next (the image region with the fewest corners, the way the fewest views turn)."""
+        if self.good:
+            return (
+                f"{sensor}'s lens is good: focal lengths and image centre known within "
+                f"{self.uncertainty_px:.2f} px "
+                "(calibrate it now; more views do no harm)."
+            )
+        row, col = np.unravel_index(int(np.argmin(self.regions)), self.regions.shape)
+        turn = TURNS[int(np.argmin(self.turns))]
+        uncertain = (
+            f"known to {self.uncertainty_px:.1f} px"
+            if math.isfinite(self.uncertainty_px)
+            else "not known yet"
+        )
+        return (
+            f"Show the board near the {REGIONS[row][col]} of {sensor}'s image, {turn}: "
+            f"the lens is {uncertain}, good from {self.wanted_std_px:g} px."
+        )
 
     def as_dict(self, labels: Sequence[str] | None = None) -> dict[str, object]:
         k = self.intrinsics
@@ -127,6 +201,8 @@ class IntrinsicsResult:
                 str(name(i)): e for i, e in zip(self.used, self.per_view_rms, strict=True)
             },
             "coverage": self.coverage.fraction,
+            "std_px": dict(zip(("fx", "fy", "cx", "cy"), self.std_px, strict=True)),
+            "good": self.good,
             "coverage_map": self.coverage.as_lists(),  # corners per cell, rows top to bottom
         }
 
@@ -139,7 +215,9 @@ class IntrinsicsResult:
             f"fx={k.fx:.2f} fy={k.fy:.2f} cx={k.cx:.2f} cy={k.cy:.2f} dist={[round(float(v), 5) for v in k.dist]} "
             f"RMS {self.rms:.3f} px over {len(self.used)} views"
             + (f"; rejected {rejected}" if self.rejected else "")
-            + f"; coverage {self.coverage.fraction:.0%} of the image"
+            + f"; coverage {self.coverage.fraction:.0%} of the image; "
+            + ("good" if self.good else "not good yet")
+            + f" (fx, fy, cx, cy known to {self.uncertainty_px:.2f} px)"
         )
 
     def save(self, path: str | os.PathLike[str]) -> None:
@@ -172,17 +250,61 @@ def _flags(p: Params) -> int:
     return flags
 
 
+@dataclasses.dataclass
+class _Solution:
+    """One cv2.calibrateCameraExtended over some views."""
+
+    rms: float
+    camera: np.ndarray
+    dist: np.ndarray
+    per_view: np.ndarray  # RMS of each view, px
+    std: np.ndarray  # standard deviations of fx, fy, cx, cy, px
+    rotations: list[np.ndarray]  # camera_R_board of each view
+
+
 def _calibrate(
     corners: Sequence[np.ndarray], board: Checkerboard, size: tuple[int, int], flags: int
-) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+) -> _Solution:
     objects = [board.object_points.astype(np.float32)] * len(corners)
     images = [c.reshape(-1, 1, 2).astype(np.float32) for c in corners]
     camera = np.eye(3)
-    rms, camera, dist, _, _, _, _, per_view = cv2.calibrateCameraExtended(
+    rms, camera, dist, rvecs, _, std, _, per_view = cv2.calibrateCameraExtended(
         objects, images, size, camera, None, flags=flags
     )
     count = 8 if flags & cv2.CALIB_RATIONAL_MODEL else 5  # OpenCV pads to 14
-    return float(rms), camera, dist.ravel()[:count], per_view.ravel()
+    return _Solution(
+        float(rms),
+        camera,
+        dist.ravel()[:count],
+        per_view.ravel(),
+        std.ravel()[:4],
+        [cv2.Rodrigues(r)[0] for r in rvecs],
+    )
+
+
+def _turns(rotations: Sequence[np.ndarray], tilt_deg: float) -> tuple[int, ...]:
+    """Views turned each way of :data:`TURNS`: the board face's direction in the camera
+    (x right, y down) at least ``tilt_deg`` off the line of sight."""
+    counts = [0] * len(TURNS)
+    limit = math.sin(math.radians(tilt_deg))
+    for rotation in rotations:
+        face = -rotation[:, 2] * (1.0 if rotation[2, 2] > 0 else -1.0)  # towards the camera
+        for k, turned in enumerate((face[0] < -limit, face[0] > limit)):
+            counts[k] += bool(turned)
+        for k, tilted in enumerate((face[1] < -limit, face[1] > limit)):
+            counts[2 + k] += bool(tilted)
+    return tuple(counts)
+
+
+def _regions(corners: Sequence[np.ndarray], width: int, height: int) -> np.ndarray:
+    """Corners in each region of :data:`REGIONS` (3x3 counts, rows top to bottom)."""
+    counts = np.zeros((3, 3), dtype=np.int64)
+    for view in corners:
+        points = np.asarray(view, dtype=np.float64).reshape(-1, 2)
+        col = np.clip((points[:, 0] + 0.5) * 3 // width, 0, 2).astype(int)
+        row = np.clip((points[:, 1] + 0.5) * 3 // height, 0, 2).astype(int)
+        np.add.at(counts, (row, col), 1)
+    return counts
 
 
 def calibrate_intrinsics(
@@ -208,17 +330,17 @@ def calibrate_intrinsics(
     flags = _flags(p)
     used = list(range(len(corners)))
     rejected: list[int] = []
-    rms, camera, dist, per_view = _calibrate([corners[i] for i in used], board, image_size, flags)
+    solution = _calibrate([corners[i] for i in used], board, image_size, flags)
     for _ in range(int(p.max_rejection_rounds)):
+        per_view = solution.per_view
         threshold = max(p.reject_factor * float(np.median(per_view)), p.reject_min_px)
         bad = [i for i, e in zip(used, per_view, strict=True) if e > threshold]
         if not bad or len(used) - len(bad) < p.min_views:
             break
         rejected += bad
         used = [i for i in used if i not in bad]
-        rms, camera, dist, per_view = _calibrate(
-            [corners[i] for i in used], board, image_size, flags
-        )
+        solution = _calibrate([corners[i] for i in used], board, image_size, flags)
+    camera = solution.camera
     coverage = CoverageMap(width, height, int(CORNER_PARAMS.defaults()["coverage_cells"]))
     for i in used:
         coverage.add(corners[i])
@@ -229,15 +351,20 @@ def calibrate_intrinsics(
         cy=float(camera[1, 2]),
         width=width,
         height=height,
-        dist=tuple(float(v) for v in dist),
+        dist=tuple(float(v) for v in solution.dist),
     )
+    std = tuple(float(v) for v in solution.std)
     return IntrinsicsResult(
         intrinsics=intrinsics,
-        rms=rms,
-        per_view_rms=[float(e) for e in per_view],
+        rms=solution.rms,
+        per_view_rms=[float(e) for e in solution.per_view],
         used=used,
         rejected=sorted(rejected),
         coverage=coverage,
+        std_px=(std[0], std[1], std[2], std[3]),
+        wanted_std_px=float(p.good_std_px),
+        regions=_regions([corners[i] for i in used], width, height),
+        turns=_turns(solution.rotations, float(p.tilt_deg)),
     )
 
 

@@ -201,6 +201,9 @@ class SensorLive:
     shared_poses: int = 0
     shared_needed: int = 0
     shared_centers: np.ndarray | None = None
+    # intrinsics: the lens from this capture's views so far (None: too few yet); its
+    # ``good`` says whether they pin it down, its ``advice`` where to show the board
+    lens: IntrinsicsResult | None = None
 
     @property
     def settled(self) -> bool:

@@ -24,7 +24,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from optrack.calibration.board import CORNER_PARAMS, Checkerboard, CoverageMap
+from optrack.calibration.board import Checkerboard
 from optrack.calibration.files import (
     BoardEntry,
     CalibrationFile,
@@ -42,6 +42,7 @@ from optrack.calibration.live import (
     Progress,
     SensorLive,
 )
+from optrack.calibration.live_lens import LensViews
 from optrack.calibration.live_refine import (
     RefinementReport,
     board_rms_px,
@@ -58,7 +59,7 @@ from optrack.calibration.network import (
 )
 from optrack.calibration.quality import CalibrationQuality
 from optrack.calibration.session import SESSION_PARAMS
-from optrack.calibration.still import StillBoard, StillBoards, corner_motion_px
+from optrack.calibration.still import StillBoard, StillBoards
 from optrack.net.messages import BoardViewMessage, DetectionsMessage
 from optrack.params import Params
 from optrack.types import Intrinsics, NetworkCalibration, SensorCalibration, as_matrix4
@@ -87,8 +88,7 @@ class _Sensor:
     on_floor: bool = False
     frames: int = 0
     arrivals: list[float] = dataclasses.field(default_factory=list)
-    intrinsics_corners: list[np.ndarray] = dataclasses.field(default_factory=list)
-    coverage: CoverageMap | None = None
+    lens: LensViews = dataclasses.field(default_factory=LensViews)  # intrinsics page
 
     def decoded(self) -> np.ndarray | None:
         """The latest preview as an RGB image (decoded once)."""
@@ -190,8 +190,7 @@ class LiveSession:
                 state.frames, state.arrivals, state.board_seen = 0, [], False
             if phase == "intrinsics":
                 self.intrinsics_sensor = sensor
-                target = self._sensors[str(sensor)]
-                target.intrinsics_corners, target.coverage = [], None
+                self._sensors[str(sensor)].lens = LensViews()
             if phase == "refinement":
                 self._detections = {}
                 self._message = INSTRUCTIONS[phase]
@@ -250,26 +249,15 @@ class LiveSession:
             if sensor.intrinsics is None:
                 sensor.intrinsics = view.intrinsics
             corners = None if view.corners is None else np.asarray(view.corners, np.float64)
-            if self.phase == "intrinsics":
-                self._take_intrinsics_view(sensor, view, corners)
-            else:
+            if self.phase != "intrinsics":
                 self.still.add(view.sensor, view.stamp, corners, view.on_floor)
-
-    def _take_intrinsics_view(
-        self, sensor: _Sensor, view: BoardViewMessage, corners: np.ndarray | None
-    ) -> None:
-        if corners is None or view.sensor != self.intrinsics_sensor:
-            return
-        last = sensor.intrinsics_corners[-1] if sensor.intrinsics_corners else None
-        if last is not None:
-            if corner_motion_px(corners, last) < float(self.params.intrinsics_min_motion_px):
                 return
-        sensor.intrinsics_corners.append(corners)
-        if sensor.coverage is None:
-            k = view.intrinsics
-            cells = int(CORNER_PARAMS.defaults()["coverage_cells"])
-            sensor.coverage = CoverageMap(k.width, k.height, cells)
-        sensor.coverage.add(corners)
+            if corners is None or view.sensor != self.intrinsics_sensor:
+                return
+            lens, size = sensor.lens, (view.intrinsics.width, view.intrinsics.height)
+            if not lens.take(corners, view.intrinsics, float(self.params.intrinsics_min_motion_px)):
+                return
+        lens.check(self.board, size, self.lock)  # good yet? where is the board missing?
 
     def take_detections(self, message: DetectionsMessage) -> None:
         """One detections batch of a node (kept during the refinement phase)."""
@@ -359,10 +347,11 @@ class LiveSession:
         else:
             pose = self._poses.get(sid)
         coverage = None
-        if st.coverage is not None:
-            coverage = np.clip(st.coverage.counts / float(self.params.coverage_corners), 0.0, 1.0)
+        if st.lens.coverage is not None:
+            counts = st.lens.coverage.counts
+            coverage = np.clip(counts / float(self.params.coverage_corners), 0.0, 1.0)
         if self.phase == "intrinsics":
-            views = len(st.intrinsics_corners)
+            views = len(st.lens.corners)
         else:
             views = status.views if status is not None else 0
         return SensorLive(
@@ -379,6 +368,7 @@ class LiveSession:
             frames=st.frames,
             capture_hz=st.capture_hz(now),
             parent=status.parent if status is not None else None,
+            lens=st.lens.lens if self.phase == "intrinsics" else None,
         )
 
     def _walk(self) -> dict[str, np.ndarray]:
@@ -400,6 +390,10 @@ class LiveSession:
 
     def _advice(self, feedback: Feedback | None) -> str:
         """One sentence: what to do now."""
+        if self.phase == "intrinsics" and self.intrinsics_sensor in self._sensors:
+            lens = self._sensors[self.intrinsics_sensor].lens.lens
+            if lens is not None:
+                return lens.advice(self.intrinsics_sensor)
         if self.phase == "extrinsics" and feedback is not None:
             sensors = feedback.sensors
             calibrated = sorted(s for s, f in sensors.items() if f.calibrated)
@@ -436,7 +430,7 @@ class LiveSession:
                 raise LiveCalibrationError(
                     f"sensor '{sensor}' is not one of the site's ({', '.join(self.sensors)})."
                 )
-            corners = list(st.intrinsics_corners)
+            corners = list(st.lens.corners)
             size = (st.intrinsics.width, st.intrinsics.height) if st.intrinsics else (0, 0)
         progress(0.1, f"calibrating {sensor} from {len(corners)} views")
         result = calibrate_intrinsics(corners, self.board, size)

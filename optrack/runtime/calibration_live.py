@@ -221,25 +221,34 @@ class LiveCalibration:
                 )
 
     def _keep_going(self) -> None:
-        """While the extrinsics still ask a sensor for shared board poses and the site's
-        operator has made every placement it was asked, it goes round again, holding the
-        board long enough for ``calibration_live.operator_searches`` searches of the
-        slowest node (a loaded computer's nodes search an image every few seconds: a
-        hold may have given one of them no still pair)."""
+        """While the extrinsics still ask a sensor for shared board poses, or the
+        intrinsics page's lens is not good yet (calibration_intrinsics.good_std_px), and
+        the site's operator has made every placement it was asked, it goes round again,
+        holding the board long enough for ``calibration_live.operator_searches`` searches
+        of the slowest node (a loaded computer's nodes search an image every few seconds:
+        a hold may have given one of them no still pair)."""
         operator, now = self.operator, time.monotonic()
-        if operator is None or self.session.phase != "extrinsics" or now < self._next_check:
+        phase = self.session.phase
+        if operator is None or phase not in ("intrinsics", "extrinsics"):
+            return
+        if now < self._next_check:
             return
         self._next_check = now + 1.0
         if not operator.finished():
             return
         state = self._with_evidence(self.session.state())
-        if state.phase != "extrinsics" or all(v.settled for v in state.sensors.values()):
+        sensor = self.session.intrinsics_sensor if phase == "intrinsics" else None
+        if state.phase != phase:
+            return
+        if phase == "extrinsics" and all(v.settled for v in state.sensors.values()):
+            return
+        if sensor is not None and (lens := state.sensors[sensor].lens) is not None and lens.good:
             return
         rates = [v.capture_hz for v in state.sensors.values() if v.capture_hz > 0]
         hold = float(self.params.operator_searches) / min(rates) if rates else 0.0
-        sentence = operator.act("extrinsics", self.board, None, min(hold, 60.0))
+        sentence = operator.act(phase, self.board, sensor, min(hold, 60.0))
         self.session.say(sentence)
-        log.info("the simulated operator goes round again (hold %.1f s)", hold)
+        log.info("the simulated operator goes round again (%s, hold %.1f s)", phase, hold)
 
     # ---------------------------------------------------------------- phases
     def start(self, phase: str, sensor: str | None = None) -> None:

@@ -31,6 +31,7 @@ from optrack.sim.venue import Venue
 
 __all__ = [
     "INTRINSICS_CELLS",
+    "INTRINSICS_HEIGHTS",
     "INTRINSICS_TURNS",
     "BoardStep",
     "SensorView",
@@ -111,15 +112,18 @@ def neighbouring_pairs(views: list[SensorView]) -> list[tuple[int, int]]:
     return [tuple(sorted((order[k], order[(k + 1) % len(order)]))) for k in range(len(order))]
 
 
-def _hold_places(venue: Venue, params: Params) -> tuple[np.ndarray, np.ndarray]:
+def _hold_places(
+    venue: Venue, params: Params, heights: tuple[float, ...] = ()
+) -> tuple[np.ndarray, np.ndarray]:
     """The floor grid the operator's placements are chosen from (Nx2: every
     ``grid_step``, ``wall_clearance`` from the walls) and the board centres held over it
-    (Mx3: the grid at each of ``hold_heights``)."""
+    (Mx3: the grid at each of ``heights``, else of ``hold_heights``)."""
     step, edge = float(params.grid_step), float(params.wall_clearance)
     xs = np.arange(-venue.half[0] + edge, venue.half[0] - edge + 1e-9, step)
     ys = np.arange(-venue.half[1] + edge, venue.half[1] - edge + 1e-9, step)
     grid = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
-    heights = [float(h) for h in str(params.hold_heights).split(",") if h.strip()]
+    if not heights:
+        heights = tuple(float(h) for h in str(params.hold_heights).split(",") if h.strip())
     centers = np.concatenate([np.column_stack([grid, np.full(len(grid), h)]) for h in heights])
     return grid, centers
 
@@ -292,9 +296,24 @@ def _floor_step(
 
 
 #: The intrinsics plan spreads the board's centre over this many image cells a side, and
-#: turns it (degrees left/right, up/down from facing the sensor) a different way each time.
+#: turns it (degrees left/right, up/down from facing the sensor) a different way each time:
+#: turned far (45 degrees) and held low and high (board centre heights, m), so that the
+#: views pin the lens's centre down (the intrinsics page calls a lens good by that,
+#: calibration_intrinsics.good_std_px: 9 places turned at most 30 degrees, held at 1.0 to
+#: 1.6 m, left it 0.5-0.8 px uncertain and up to 1.2 px off; these, 0.45-0.5 px after 12).
 INTRINSICS_CELLS = 3
-INTRINSICS_TURNS = ((0, 0), (30, 0), (-30, 0), (0, 20), (0, -20), (25, 15), (-25, -15), (25, -15))
+INTRINSICS_TURNS = (
+    (0, 0),
+    (45, 0),
+    (-45, 0),
+    (0, 30),
+    (0, -30),
+    (35, 25),
+    (-35, -25),
+    (35, -25),
+    (-35, 25),
+)
+INTRINSICS_HEIGHTS = (0.7, 1.0, 1.3, 1.6, 1.9)
 
 
 def plan_intrinsics_steps(
@@ -317,7 +336,7 @@ def plan_intrinsics_steps(
         raise ValueError(f"sensor {index} is not one of the {len(views)} sensors")
     view, board = views[index], PhysicalBoard.from_spec(spec, params)
     step = float(params.grid_step)
-    _, base = _hold_places(venue, params)
+    _, base = _hold_places(venue, params, INTRINSICS_HEIGHTS)
     to_camera = view.world_T_camera[:3, 3] - base
     heading = np.arctan2(to_camera[:, 1], to_camera[:, 0])
     elevation = np.arctan2(to_camera[:, 2], np.linalg.norm(to_camera[:, :2], axis=1))

@@ -112,12 +112,13 @@ OPERATOR_PARAMS = register(
             ),
             Param(
                 "intrinsics_places",
-                9,
+                16,
                 min=1,
                 max=40,
                 step=1,
                 help="Places the simulated operator shows the board at for one sensor's "
-                "intrinsics (show_board), each turned another way.",
+                "intrinsics (show_board), each turned another way, all over the sensor's "
+                "image (the intrinsics page calls the lens good after about 12 of them).",
             ),
             Param(
                 "intrinsics_hold_s",
@@ -502,7 +503,7 @@ class SimulatedOperator:
         atomic_write_text(path, yaml.safe_dump(data, sort_keys=False))
         # at least the operator's own hold (longer when asked: slow nodes)
         hold = max(order.hold, float(p.intrinsics_hold_s if action == "show_board" else p.hold_s))
-        planned = self._check_steps(path, hold) if action in ("move_board", "lay_board") else 0.0
+        planned = self._check_steps(path, hold) if spec is not None else 0.0
         start = time.time() + float(p.lead_s)
         if planned:
             with self._lock:
@@ -518,8 +519,8 @@ class SimulatedOperator:
 
     def _check_steps(self, path: Path, hold: float) -> float:
         """Refuse a scene whose operator has no placement to make (the board is seen by no
-        two sensors together, or nowhere on the floor); else the seconds its placements
-        take (the board held ``hold`` s at each)."""
+        two sensors together, nowhere on the floor, or not whole by the sensor it is shown
+        to); else the seconds its placements take (the board held ``hold`` s at each)."""
         from optrack.sim.board import BOARD_PARAMS
         from optrack.sim.world import Simulation
 
@@ -534,6 +535,7 @@ class SimulatedOperator:
         if sim.operator is None or not sim.operator.steps:
             raise OperatorError(
                 "the simulated operator found no place for the board that the sensors see "
-                "(together, or on the floor); use a larger board or check the sensors' views."
+                "(together, on the floor, or whole); use a larger board or check the sensors' "
+                "views."
             )
         return sim.operator.planned_seconds(sim.operator.start_point)

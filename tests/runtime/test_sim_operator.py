@@ -13,7 +13,7 @@ from optrack.net.bus import Bus
 from optrack.runtime.config import NODE_PARAMS
 from optrack.runtime.node import CommandError, Node, send_command
 from optrack.runtime.site_params import SITE_PARAMS
-from optrack.sim.operator import OperatorError, SceneSwitch, SimulatedOperator
+from optrack.sim.operator import OPERATOR_PARAMS, OperatorError, SceneSwitch, SimulatedOperator
 from optrack.sim.sensor import SimulatedSensor
 from optrack.sim.world import Simulation
 
@@ -79,7 +79,10 @@ def test_the_simulated_operator_shows_the_board_to_one_sensor_all_over_its_image
     hub, make_client, tmp_path
 ):
     """The intrinsics page's scene: every placement is seen whole by the one sensor asked
-    for, the board's centre in several cells of its image and turned several ways."""
+    for, the board's centre in several cells of its image, turned several ways (up to 45
+    degrees) and held low and high (the views must pin the lens down: the page calls it
+    good by calibration_intrinsics.good_std_px); the site status says when it is done (the
+    wizard's backend sends the operator round again while the lens is not good)."""
     from optrack.geometry import invert, transform_points
 
     uris = [f"sim://calibration/{k}?sensors=2&id=cam{k}" for k in range(2)]
@@ -110,7 +113,8 @@ def test_the_simulated_operator_shows_the_board_to_one_sensor_all_over_its_image
         for node in nodes:
             node.close()
     steps = sensor.simulation.operator.steps
-    assert len(steps) == 9 and all(s.kind == "hold" and s.sensors == (1,) for s in steps)
+    places = OPERATOR_PARAMS.defaults()["intrinsics_places"]
+    assert len(steps) == places and all(s.kind == "hold" and s.sensors == (1,) for s in steps)
     assert sensor.simulation.operator.params.hold_seconds == 1.5
     truth = Simulation("calibration", sensors=2).sensors[1]
     k = truth.model.intrinsics
@@ -124,8 +128,11 @@ def test_the_simulated_operator_shows_the_board_to_one_sensor_all_over_its_image
         to_camera = truth.world_T_camera[:3, 3] - step.world_T_board[:3, 3]
         cos = -step.world_T_board[:3, 2] @ to_camera / np.linalg.norm(to_camera)
         turns.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
-    assert len(cells) >= 3
-    assert max(turns) - min(turns) >= 20.0
+    assert len(cells) >= 5
+    assert max(turns) - min(turns) >= 35.0
+    heights = [step.world_T_board[2, 3] for step in steps]
+    assert max(heights) - min(heights) >= 0.6
+    assert float(operator.status_values()["operator.until"]) > time.time()
 
 
 def test_the_simulated_operator_carries_the_sites_board_and_needs_one(tmp_path):
