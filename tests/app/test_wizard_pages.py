@@ -130,6 +130,52 @@ def test_intrinsics_page_shows_the_coverage_of_the_sensor_it_captures(wizard):
     assert page.isComplete()  # optional: Next keeps the sensors' own intrinsics
 
 
+def lens(std_px):
+    """The lens check of some views, as the backend's IntrinsicsResult carries it."""
+    from optrack.calibration.board import CoverageMap
+    from optrack.calibration.intrinsics import IntrinsicsResult
+
+    regions = np.full((3, 3), 40)
+    regions[2, 0] = 3  # few corners near the bottom-left corner
+    return IntrinsicsResult(
+        intrinsics=KINECT,
+        rms=0.07,
+        per_view_rms=[0.07] * 9,
+        used=list(range(9)),
+        rejected=[],
+        coverage=CoverageMap(512, 424),
+        std_px=std_px,
+        regions=regions,
+        turns=(4, 3, 0, 5),
+    )
+
+
+def test_intrinsics_page_says_where_the_board_is_missing_until_the_lens_is_good(wizard):
+    """While capturing, the tile's caption says how well the lens is known, the page's
+    sentence (the backend's advice) where to show the board; the table says whether the
+    calibrated lens is good."""
+    page = wizard.intrinsics_page
+    page.sensor.addItems(SENSORS)
+    page.sensor.setCurrentText("cam1")
+    unsure = lens((0.6, 0.55, 0.83, 0.7))
+    cam1 = sensor("cam1", 9, False, lens=unsure)
+    page.show_state(state("intrinsics", [cam1], message=unsure.advice("cam1")))
+    assert page.tile.caption == "cam1: 9 views, lens known to 0.8 px"
+    assert page.message.text() == (
+        "Show the board near the bottom-left corner of cam1's image, tilted up: the lens "
+        "is known to 0.8 px, good from 0.5 px."
+    )
+    assert not page.lens_good("cam1")
+    good = lens((0.3, 0.3, 0.42, 0.4))
+    page.show_state(state("intrinsics", [sensor("cam1", 12, False, lens=good)]))
+    assert page.tile.caption == "cam1: 12 views, lens good" and page.lens_good("cam1")
+    assert good.advice("cam1").startswith("cam1's lens is good: focal lengths and image centre")
+    wizard.last_state = state("idle", [], intrinsics_results={"cam1": good, "cam2": unsure})
+    page.show_state(wizard.last_state)
+    assert page.table.text("cam1", "intrinsics") == "calibrated, good (±0.42 px), RMS 0.07 px"
+    assert page.table.text("cam2", "intrinsics").startswith("calibrated, not good yet (±0.83 px)")
+
+
 def test_floor_page_counts_floor_views_and_needs_a_solve(wizard):
     page = wizard.floor_page
     page.images.set_sensors(SENSORS)
