@@ -152,8 +152,9 @@ def wizard_screenshots(settle) -> int:  # noqa: ANN001 - settle(ms) processes Qt
         intrinsics.sensor.setCurrentIndex(0)
         intrinsics.start_capture()
         sensor = intrinsics.sensor.currentText()
-        needed = 12  # the simulated operator shows the board all over the image, turned
-        enough = lambda: intrinsics.views_seen.get(sensor, 0) >= needed  # noqa: E731
+        # the simulated operator shows the board all over the image, turned, until the page
+        # calls the lens good
+        enough = lambda: intrinsics.lens_good(sensor)  # noqa: E731
         end = time.monotonic() + 240
         while not enough() and time.monotonic() < end:
             settle(500)
@@ -165,7 +166,8 @@ def wizard_screenshots(settle) -> int:  # noqa: ANN001 - settle(ms) processes Qt
                 "intrinsics",
             )
         else:
-            print(f"only {intrinsics.views_seen.get(sensor, 0)} intrinsics views in 240 s")
+            views = intrinsics.views_seen.get(sensor, 0)
+            print(f"{sensor}'s lens not good after 240 s ({views} views)")
             intrinsics.stop_capture()
         shot(wizard, "wizard-2-intrinsics.png")
         wizard.next()
