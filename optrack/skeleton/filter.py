@@ -18,8 +18,13 @@ import numba
 import numpy as np
 
 from optrack.params import Params
-from optrack.skeleton.kernels import part_distances, score_particles, segment_distances
-from optrack.skeleton.likelihood import associate, sorted_points
+from optrack.skeleton.kernels import (
+    PartitionScorer,
+    nearest_areas,
+    part_distances,
+    segment_distances,
+)
+from optrack.skeleton.likelihood import sorted_points
 from optrack.skeleton.model import (
     FRAMES,
     LIMITS,
@@ -80,29 +85,59 @@ def motion_spread(params: Params, dt: float) -> np.ndarray:
 
 @numba.njit(cache=True, fastmath=True)
 def _exponent(centred: np.ndarray, target: float) -> float:
-    low, high = -6.0, 8.0  # log10 of beta, found to 14 / 2^16 decades
-    for _ in range(16):
-        mid = 0.5 * (low + high)
-        beta = 10.0**mid
-        total, squares = 0.0, 0.0
+    """Newton's method on log10(beta) for ESS(beta) = target, kept inside a bracket that
+    each step narrows (bisection where Newton would leave it), from the Gaussian guess:
+    a few passes over the weights instead of bisection's 16; to 1e-6 decades."""
+    low, high = -6.0, 8.0  # log10 of beta; ESS falls as beta grows
+    # Start where a Gaussian spread of log-weights would put it: ESS/N = exp(-(beta sd)^2).
+    n = len(centred)
+    sd = np.sqrt(max(np.var(centred), 1e-300))
+    u = min(max(np.log10(np.sqrt(-np.log(min(max(target / n, 1e-9), 0.999))) / sd), low), high)
+    for _ in range(40):
+        beta = 10.0**u
+        s1, s2, d1, d2 = 0.0, 0.0, 0.0, 0.0
         for value in centred:
             w = np.exp(beta * value)
-            total += w
-            squares += w * w
-        if total * total / squares > target:
-            low = mid
+            s1 += w
+            s2 += w * w
+            d1 += value * w
+            d2 += 2.0 * value * w * w
+        excess = s1 * s1 / s2 - target
+        if excess > 0.0:
+            low = u
         else:
-            high = mid
-    return 10.0**low
+            high = u
+        slope = (2.0 * s1 * d1 * s2 - s1 * s1 * d2) / (s2 * s2) * beta * np.log(10.0)
+        step = -excess / slope if slope < 0.0 else 0.0
+        if step == 0.0 or not low < u + step < high:
+            step = 0.5 * (low + high) - u
+        u += step
+        if abs(step) < 1e-6 or high - low < 1e-6:
+            break
+    return 10.0**u
+
+
+@numba.njit(cache=True, fastmath=True)
+def _beta(centred: np.ndarray, survival_rate: float) -> float:
+    """:func:`annealing_exponent` of log-weights whose largest is 0."""
+    if not np.any(centred < -1e-12):
+        return 1.0
+    return _exponent(centred, survival_rate * centred.shape[0])
+
+
+@numba.njit(cache=True, fastmath=True)
+def _weights(log_weights: np.ndarray, survival_rate: float) -> np.ndarray:
+    """Normalised weights exp(beta * log_weights), beta from :func:`annealing_exponent`."""
+    centred = log_weights - log_weights.max()
+    w = np.exp(_beta(centred, survival_rate) * centred)
+    return w / w.sum()
 
 
 def annealing_exponent(log_weights: np.ndarray, survival_rate: float) -> float:
     """The exponent beta for which the weights exp(beta * log_weights) keep an effective
-    sample size of ``survival_rate`` times the particle count (bisection in log beta)."""
+    sample size of ``survival_rate`` times the particle count."""
     centred = np.asarray(log_weights, dtype=np.float64) - np.max(log_weights)
-    if not np.any(centred < -1e-12):
-        return 1.0
-    return float(_exponent(centred, survival_rate * len(centred)))
+    return float(_beta(centred, float(survival_rate)))
 
 
 def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -140,6 +175,16 @@ def _take_and_diffuse(particles, idx, chosen, noise, sd, low, high):
             if noise.shape[0]:
                 value = min(max(value + noise[i, j] * sd[j], low[j]), high[j])
             particles[i, idx[j]] = value
+
+
+@numba.njit(cache=True)
+def _resample_layer(particles, idx, log_weights, survival_rate, offset, noise, sd, low, high):
+    """One annealing layer after scoring, in place: weigh the particles (the exponent
+    that keeps ``survival_rate`` of them effective), resample the columns ``idx``
+    systematically (``offset``: :func:`systematic_resample`'s u) and diffuse them
+    (:func:`_take_and_diffuse`)."""
+    chosen = _systematic(_weights(log_weights, survival_rate), offset)
+    _take_and_diffuse(particles, idx, chosen, noise, sd, low, high)
 
 
 def _weighted_mean(values: np.ndarray, weights: np.ndarray, dims: tuple[int, ...]) -> np.ndarray:
@@ -239,25 +284,23 @@ class SkeletonFilter:
         expected = self.expected_support(shown)[parts]
         idx = np.array(dims)
         consts = (float(p.sigma), float(p.alpha), float(p.support_weight))
-        frames = PARTITION_FRAMES[partition]
-        cloud = sorted_points(scored, baseline)
+        scorer = PartitionScorer(
+            self.estimate, dims, PARTITION_FRAMES[partition], parts, self.shape,
+            sorted_points(scored, baseline), expected, consts, int(p.threads),
+        )  # fmt: skip
+        low, high = LIMITS[idx].T
         for layer in range(layers):
-            ll = score_particles(
-                self.particles, self.estimate, dims, frames, parts, self.shape, cloud, expected,
-                consts, int(p.threads),
-            )  # fmt: skip
-            beta = annealing_exponent(ll, float(p.survival_rate))
-            w = np.exp(beta * (ll - ll.max()))
-            w /= w.sum()
+            ll = scorer(self.particles)
             if layer == layers - 1:  # the estimate: the mean of the best few
-                sharp = annealing_exponent(ll, float(p.estimate_survival))
-                best = np.exp(sharp * (ll - ll.max()))
-                self.estimate[idx] = _weighted_mean(self.particles[:, idx], best / best.sum(), dims)
-            chosen = systematic_resample(w, self.rng)
-            sd = spread[idx] * float(p.anneal_decay) ** (layer + 1)
-            rows = len(chosen) if layer < layers - 1 else 0  # the last layer: no diffusion
+                best = _weights(ll, float(p.estimate_survival))
+                self.estimate[idx] = _weighted_mean(self.particles[:, idx], best, dims)
+            offset = self.rng.random()  # systematic_resample's u
+            rows = len(ll) if layer < layers - 1 else 0  # the last layer: no diffusion
             noise = self.rng.normal(size=(rows, len(idx)))
-            _take_and_diffuse(self.particles, idx, chosen, noise, sd, *LIMITS[idx].T)
+            sd = spread[idx] * float(p.anneal_decay) ** (layer + 1)
+            _resample_layer(
+                self.particles, idx, ll, float(p.survival_rate), offset, noise, sd, low, high
+            )
         if partition == "torso" and _YAW in dims:  # keep yaws next to their mean
             delta = self.particles[:, _YAW] - self.estimate[_YAW]
             self.particles[:, _YAW] = self.estimate[_YAW] + np.angle(np.exp(1j * delta))
@@ -293,9 +336,10 @@ class SkeletonFilter:
         share of what it should hold (capped at 1)."""
         state = self.estimate if state is None else state
         pts, rot = forward_kinematics(state, self.shape)
-        geometry = part_geometry(pts[None], rot[None], self.shape)
-        _, area = associate(points, geometry, float(self.params.alpha))
-        area = area[0]
+        geometry = part_geometry(pts[None], rot[None], self.shape)[0]
+        area = nearest_areas(
+            np.asarray(points, dtype=np.float64), geometry, float(self.params.alpha)
+        )
         counts = np.bincount(area[area >= 0], minlength=2 * len(PARTS)).reshape(-1, 2)
         expected = self.expected_support(len(points))
         support = np.minimum(1.0, counts / np.maximum(expected, 1e-9))

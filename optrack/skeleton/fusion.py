@@ -181,6 +181,22 @@ def _to_world(world_T_camera: np.ndarray, points: np.ndarray) -> np.ndarray:
     return out
 
 
+def _box_in_camera(
+    world_T_camera: np.ndarray, xy: Sequence[float], height: float, params: Params
+) -> np.ndarray:
+    """The corners (8, 3) of the box around the person's cylinder, in the camera's frame."""
+    r = float(params.radius)
+    corners = np.array(
+        [
+            (float(xy[0]) + sx * r, float(xy[1]) + sy * r, z)
+            for sx in (-1, 1)
+            for sy in (-1, 1)
+            for z in (float(params.floor_margin), float(height) + float(params.head_margin))
+        ]
+    )
+    return transform_points(invert(world_T_camera), corners)
+
+
 def person_roi(
     intrinsics: Intrinsics,
     shape: tuple[int, int],
@@ -193,16 +209,7 @@ def person_roi(
     cylinder: the projection of its bounding box, the whole image when the box reaches
     behind the camera, None when it falls outside the image."""
     rows, cols = shape
-    r = float(params.radius)
-    corners = np.array(
-        [
-            (float(xy[0]) + sx * r, float(xy[1]) + sy * r, z)
-            for sx in (-1, 1)
-            for sy in (-1, 1)
-            for z in (float(params.floor_margin), float(height) + float(params.head_margin))
-        ]
-    )
-    camera = transform_points(invert(world_T_camera), corners)
+    camera = _box_in_camera(world_T_camera, xy, height, params)
     if np.any(camera[:, 2] <= 0.05):
         return 0, 0, cols, rows
     pixels, _ = project(camera, intrinsics)
@@ -335,6 +342,10 @@ def person_points(
     i = frame.intrinsics
     scale = frame.depth_scale if frame.depth.dtype == np.uint16 else 1.0
     pose = np.asarray(world_T_camera, dtype=np.float32)
+    # A point of the cylinder lies in its box, whose depths (the camera's z) span those of
+    # its corners: a pixel deeper or nearer (by 1 cm more than float32 rounds) is skipped
+    # before it is placed in the world.
+    depths = _box_in_camera(world_T_camera, xy, height, params)[:, 2]
     # Each bound as numpy compares it with float32 points: rounded to float32 first.
     bounds = np.array(
         [
@@ -345,6 +356,8 @@ def person_points(
             float(height) + float(params.head_margin),
             float(params.edge_jump),
             scale,
+            depths.min() - 0.01,
+            depths.max() + 0.01,
         ],
         dtype=np.float32,
     )
@@ -355,49 +368,41 @@ def person_points(
     )  # fmt: skip
 
 
-@numba.njit(cache=True)
-def _metres(depth, scale, jump):
-    """The rectangle in metres (float32), 0 where invalid or (jump > 0) on an edge."""
+@numba.njit(cache=True, inline="always")
+def _metre(depth, r, c, scale, jump):
+    """One pixel in metres (float32), 0 where invalid or (jump > 0) on a depth edge."""
     rows, cols = depth.shape
-    z = np.empty((rows, cols), dtype=np.float32)
-    for r in range(rows):
-        for c in range(cols):
-            z[r, c] = np.float32(depth[r, c]) * scale
+    d = np.float32(depth[r, c]) * scale
     if jump <= 0.0:
-        return z
-    out = np.empty_like(z)
-    for r in range(rows):
-        for c in range(cols):
-            d = z[r, c]
-            bad = not d > 0
-            if r > 0:
-                bad |= not abs(d - z[r - 1, c]) <= jump
-            if r + 1 < rows:
-                bad |= not abs(z[r + 1, c] - d) <= jump
-            if c > 0:
-                bad |= not abs(d - z[r, c - 1]) <= jump
-            if c + 1 < cols:
-                bad |= not abs(z[r, c + 1] - d) <= jump
-            out[r, c] = np.float32(0.0) if bad else d
-    return out
+        return d
+    bad = not d > 0
+    if r > 0:
+        bad |= not abs(d - np.float32(depth[r - 1, c]) * scale) <= jump
+    if r + 1 < rows:
+        bad |= not abs(np.float32(depth[r + 1, c]) * scale - d) <= jump
+    if c > 0:
+        bad |= not abs(d - np.float32(depth[r, c - 1]) * scale) <= jump
+    if c + 1 < cols:
+        bad |= not abs(np.float32(depth[r, c + 1]) * scale - d) <= jump
+    return np.float32(0.0) if bad else d
 
 
 @numba.njit(cache=True)
 def _person_points(depth, stride, rays, pose, bounds, others):
-    z = _metres(depth, bounds[6], bounds[5])
-    rows, cols = z.shape
+    rows, cols = depth.shape
+    scale, jump, nearest, farthest = bounds[6], bounds[5], bounds[7], bounds[8]
     out = np.empty(
         (((rows + stride - 1) // stride) * ((cols + stride - 1) // stride), 3), np.float32
     )
     count = 0
     for r in range(0, rows, stride):
         for c in range(0, cols, stride):
-            if not z[r, c] > 0:
-                continue
-            depth_m = np.float64(z[r, c])
+            zf = np.float32(depth[r, c]) * scale
+            if not (zf > 0 and zf >= nearest and zf <= farthest):
+                continue  # no depth, or out of the person's box
+            depth_m = np.float64(zf)
             x = np.float32((c - rays[0]) * depth_m / rays[2])
             y = np.float32((r - rays[1]) * depth_m / rays[3])
-            zf = z[r, c]
             wx = x * pose[0, 0] + y * pose[0, 1] + zf * pose[0, 2] + pose[0, 3]
             wy = x * pose[1, 0] + y * pose[1, 1] + zf * pose[1, 2] + pose[1, 3]
             wz = x * pose[2, 0] + y * pose[2, 1] + zf * pose[2, 2] + pose[2, 3]
@@ -407,7 +412,7 @@ def _person_points(depth, stride, rays, pose, bounds, others):
             for o in range(others.shape[0]):  # nearer another person: theirs
                 ex, ey = np.float64(wx) - others[o, 0], np.float64(wy) - others[o, 1]
                 keep = keep and np.float64(near2) <= ex * ex + ey * ey
-            if keep:
+            if keep and _metre(depth, r, c, scale, jump) > 0:  # not on an edge
                 out[count, 0], out[count, 1], out[count, 2] = wx, wy, wz
                 count += 1
     return out[:count]

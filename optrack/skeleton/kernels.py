@@ -32,7 +32,13 @@ from optrack.skeleton.model import (
     forward_kinematics,
 )
 
-__all__ = ["part_distances", "score_particles", "segment_distances"]
+__all__ = [
+    "PartitionScorer",
+    "nearest_areas",
+    "part_distances",
+    "score_particles",
+    "segment_distances",
+]
 
 LANES = 32  # poses whose kinematics and geometry are computed together (vector lanes)
 
@@ -84,30 +90,37 @@ def _fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, tables):
 def _geometry_lanes(pts, rot, parts, tables, radii, out):
     """:func:`~optrack.skeleton.model.geometry_pose` for a few poses at once: pts
     (Q, 3, lanes), rot (F, 3, 3, lanes), out (len(parts), G, lanes); ``tables``:
-    PART_TABLES."""
+    PART_TABLES. The bone is the difference of its ends in float64; the rest in float32
+    (what ``out`` holds), its two normalisations by reciprocal square roots."""
     pa, pb, pf, pt, aspect = tables
     lanes = pts.shape[2]
+    one, tiny = np.float32(1.0), np.float32(1e-18)
     for j in range(parts.shape[0]):
         k = parts[j]
         a, b, f = pa[k], pb[k], pf[k]
-        w, t0, t1 = 1.0 / aspect[k], pt[k, 0], pt[k, 1]
+        w, t0, t1 = np.float32(1.0 / aspect[k]), np.float32(pt[k, 0]), np.float32(pt[k, 1])
+        r0, dr = np.float32(radii[k, 0]), np.float32(radii[k, 1] - radii[k, 0])
         row = out[j]
         for lane in range(lanes):
-            u0 = pts[b, 0, lane] - pts[a, 0, lane]
-            u1 = pts[b, 1, lane] - pts[a, 1, lane]
-            u2 = pts[b, 2, lane] - pts[a, 2, lane]
-            length = max(np.sqrt(u0 * u0 + u1 * u1 + u2 * u2), 1e-9)
-            u0, u1, u2 = u0 / length, u1 / length, u2 / length
+            u0 = np.float32(pts[b, 0, lane] - pts[a, 0, lane])
+            u1 = np.float32(pts[b, 1, lane] - pts[a, 1, lane])
+            u2 = np.float32(pts[b, 2, lane] - pts[a, 2, lane])
+            squared = max(u0 * u0 + u1 * u1 + u2 * u2, tiny)  # the length at least 1e-9
+            inverse = one / np.sqrt(squared)
+            length = squared * inverse
+            u0, u1, u2 = u0 * inverse, u1 * inverse, u2 * inverse
             # The forward axis: the frame's x made square to the bone (its y if parallel).
-            x0, x1, x2 = rot[f, 0, 0, lane], rot[f, 1, 0, lane], rot[f, 2, 0, lane]
-            side = abs(x0 * u0 + x1 * u1 + x2 * u2) >= 0.999
-            c0 = rot[f, 0, 1, lane] if side else x0
-            c1 = rot[f, 1, 1, lane] if side else x1
-            c2 = rot[f, 2, 1, lane] if side else x2
+            x0 = np.float32(rot[f, 0, 0, lane])
+            x1 = np.float32(rot[f, 1, 0, lane])
+            x2 = np.float32(rot[f, 2, 0, lane])
+            side = abs(x0 * u0 + x1 * u1 + x2 * u2) >= np.float32(0.999)
+            c0 = np.float32(rot[f, 0, 1, lane]) if side else x0
+            c1 = np.float32(rot[f, 1, 1, lane]) if side else x1
+            c2 = np.float32(rot[f, 2, 1, lane]) if side else x2
             dot = c0 * u0 + c1 * u1 + c2 * u2
             e0, e1, e2 = c0 - dot * u0, c1 - dot * u1, c2 - dot * u2
-            en = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-            e0, e1, e2 = e0 / en, e1 / en, e2 / en
+            inverse_e = one / np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+            e0, e1, e2 = e0 * inverse_e, e1 * inverse_e, e2 * inverse_e
             for r in range(3):
                 row[r, lane] = pts[a, r, lane]
             row[3, lane], row[4, lane], row[5, lane] = u0, u1, u2
@@ -116,15 +129,17 @@ def _geometry_lanes(pts, rot, parts, tables, radii, out):
             row[10, lane] = (u2 * e0 - u0 * e2) * w
             row[11, lane] = (u0 * e1 - u1 * e0) * w
             row[12, lane], row[13, lane] = t0 * length, t1 * length
-            row[14, lane], row[15, lane] = radii[k, 0], radii[k, 1] - radii[k, 0]
-            row[16, lane] = 1.0 / length
+            row[14, lane], row[15, lane] = r0, dr
+            row[16, lane] = inverse
 
 
 @numba.njit(fastmath=True, inline="always")
 def _extents_lanes(geometry, axis, widen, out):
     """:func:`~optrack.skeleton.likelihood._extent` of each part of a few poses at once:
     geometry (K, G, lanes); out (2 K, lanes): each part's low and high along ``axis``
-    (its reach: ``widen`` times its largest radius)."""
+    (its reach: ``widen`` times its largest radius), in float32 (the margin of 1e-4 m
+    and 0.1 % covers its rounding)."""
+    widen, one = np.float32(widen), np.float32(1.0)
     for k in range(geometry.shape[0]):
         g = geometry[k]
         for lane in range(geometry.shape[2]):
@@ -136,10 +151,11 @@ def _extents_lanes(geometry, axis, widen, out):
             elif axis == 2:
                 side = ux * ey - uy * ex
             fx, fy, fz = g[9, lane], g[10, lane], g[11, lane]
-            aspect = 1.0 / np.sqrt(fx * fx + fy * fy + fz * fz)
+            aspect = one / np.sqrt(fx * fx + fy * fy + fz * fz)
             u, e = g[3 + axis, lane], g[6 + axis, lane]
             reach = widen * max(g[14, lane], g[14, lane] + g[15, lane])
-            half = reach * np.sqrt(u * u + e * e + (aspect * side) ** 2) * 1.001 + 1e-4
+            half = reach * np.sqrt(u * u + e * e + (aspect * side) ** 2) * np.float32(1.001)
+            half += np.float32(1e-4)
             start, end = g[axis, lane] + g[12, lane] * u, g[axis, lane] + g[13, lane] * u
             out[2 * k, lane] = min(start, end) - half
             out[2 * k + 1, lane] = max(start, end) + half
@@ -147,17 +163,21 @@ def _extents_lanes(geometry, axis, widen, out):
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
 def _score_kernel(
-    particles, estimate, dims, cos_p, sin_p, cos_e, sin_e, base_rot, base_pts, offsets, frames_on,
+    particles, dims, cos_p, sin_p, fixed, copied, base_rot, base_pts, offsets, frames_on,
     points_on, parts, radii, fk_tables, part_tables, px, py, pz, axis, starts, grid, base,
     expected, consts, out,
 ):  # fmt: skip
+    estimate, cos_e, sin_e = fixed
+    copy_dofs, copy_frames, copy_points = copied
     n = particles.shape[0]
     for c in numba.prange((n + LANES - 1) // LANES):  # LANES particles at a time
         first = c * LANES
         lanes = min(LANES, n - first)
+        # Only what the partition's kinematics and parts read is filled in (the estimate's
+        # numbers, frames and points it does not turn; the rest it computes).
         xs = np.empty((D, lanes))
         cs, sn = np.empty((D, lanes), np.float32), np.empty((D, lanes), np.float32)
-        for d in range(D):
+        for d in copy_dofs:
             xs[d, :], cs[d, :], sn[d, :] = estimate[d], cos_e[d], sin_e[d]
         for j in range(dims.shape[0]):
             d = dims[j]
@@ -166,11 +186,11 @@ def _score_kernel(
                 cs[d, lane], sn[d, lane] = cos_p[first + lane, j], sin_p[first + lane, j]
         rot = np.empty(base_rot.shape + (lanes,))
         pts = np.empty(base_pts.shape + (lanes,))
-        for f in range(base_rot.shape[0]):
+        for f in copy_frames:
             for r in range(3):
                 for q in range(3):
                     rot[f, r, q, :] = base_rot[f, r, q]
-        for q in range(base_pts.shape[0]):
+        for q in copy_points:
             for r in range(3):
                 pts[q, r, :] = base_pts[q, r]
         _fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, fk_tables)
@@ -180,13 +200,75 @@ def _score_kernel(
         extents = np.empty((2 * parts.shape[0], lanes), dtype=np.float32)
         _extents_lanes(geometry, axis, 1.0 + consts[1], extents)
         runs = np.empty(2 * parts.shape[0])
-        pose = np.empty((parts.shape[0], G), dtype=np.float32)  # one pose's, contiguous
-        for lane in range(lanes):
-            pose[:, :] = geometry[:, :, lane]
+        for lane in range(lanes):  # each pose's rows read in place (a copy cost more)
             runs[:] = extents[:, lane]
             out[first + lane] = likelihood_within(
-                px, py, pz, axis, starts, grid, base, pose, expected, consts, best, area, runs
-            )
+                px, py, pz, axis, starts, grid, base, geometry[:, :, lane], expected, consts,
+                best, area, runs,
+            )  # fmt: skip
+
+
+def _read_rows(frames_on: np.ndarray, points_on: np.ndarray, parts: np.ndarray, dims) -> tuple:
+    """What a partition's kernel reads but does not compute: the estimate's numbers (the
+    root's position and the angles of the frames it turns, less its own ``dims``), the
+    frames and the points (parents of those it turns, and the parts' ends and frames)."""
+    fparent, fdof, _, _, pparent, pframe = FK_TABLES
+    pa, pb, pf = PART_TABLES[:3]
+    dofs = {0, 1, 2} | {int(d) for d in fdof[frames_on].ravel() if d >= 0}
+    frames = {int(fparent[f]) for f in frames_on} | {int(pframe[q]) for q in points_on}
+    frames |= {int(pf[k]) for k in parts}
+    points = {int(pparent[q]) for q in points_on} | {int(pa[k]) for k in parts}
+    points |= {int(pb[k]) for k in parts}
+    return tuple(
+        np.array(sorted(chosen - set(own) - {-1}), dtype=np.int64)
+        for chosen, own in ((dofs, dims), (frames, frames_on), (points, points_on))
+    )
+
+
+class PartitionScorer:
+    """:func:`score_particles` with everything that does not depend on the particles
+    made once: an anneal scores the same partition against the same estimate and cloud
+    in every layer (see :func:`score_particles` for the arguments)."""
+
+    def __init__(
+        self,
+        estimate: np.ndarray,
+        dims: tuple[int, ...],
+        frames: tuple[str, ...],
+        parts: np.ndarray,
+        shape: BodyShape,
+        cloud: tuple,
+        expected: np.ndarray,
+        consts: tuple[float, float, float],
+        threads: int = 1,
+    ) -> None:
+        estimate = np.asarray(estimate, dtype=np.float64)
+        base_pts, base_rot = forward_kinematics(estimate, shape)
+        self.dims = np.asarray(dims, dtype=np.int64)
+        parts = np.asarray(parts, dtype=np.int64)
+        chosen = np.array([name in frames for name in FRAMES])
+        frames_on = np.flatnonzero(chosen)
+        points_on = np.flatnonzero(chosen[FK_TABLES[-1]])  # the points on those frames
+        # Sines and cosines in float32 by numpy's vector path, as forward_kinematics does.
+        fixed = estimate.astype(np.float32)
+        sigma, alpha, weight = consts
+        self.threads = int(threads)
+        self._args = (
+            (estimate, np.cos(fixed), np.sin(fixed)),
+            _read_rows(frames_on, points_on, parts, self.dims), base_rot, base_pts,
+            shape._offsets, frames_on, points_on, parts, shape.radii_array, FK_TABLES,
+            PART_TABLES, *cloud, np.asarray(expected, dtype=np.float64).reshape(-1),
+            np.array([1.0 / (2.0 * sigma * sigma), alpha, weight]),
+        )  # fmt: skip
+
+    def __call__(self, particles: np.ndarray) -> np.ndarray:
+        """Log-likelihood (eq. 9) of each particle (P, D), (P,)."""
+        particles = np.ascontiguousarray(particles, dtype=np.float64)
+        turned = particles[:, self.dims].astype(np.float32)
+        out = np.empty(len(particles))
+        set_threads(self.threads)
+        _score_kernel(particles, self.dims, np.cos(turned), np.sin(turned), *self._args, out)
+        return out
 
 
 def score_particles(
@@ -208,27 +290,10 @@ def score_particles(
     are the ``parts`` (indices) against ``cloud``
     (:func:`~optrack.skeleton.likelihood.sorted_points`, made once for all the layers of
     an anneal), with ``expected`` (K, 2) points
-    per area of interest and ``consts`` (sigma, alpha, support_weight)."""
-    estimate = np.asarray(estimate, dtype=np.float64)
-    base_pts, base_rot = forward_kinematics(estimate, shape)
-    dims = np.asarray(dims, dtype=np.int64)
-    particles = np.ascontiguousarray(particles, dtype=np.float64)
-    # Sines and cosines in float32 by numpy's vector path, as forward_kinematics does.
-    turned, fixed = particles[:, dims].astype(np.float32), estimate.astype(np.float32)
-    chosen = np.array([name in frames for name in FRAMES])
-    frames_on = np.flatnonzero(chosen)
-    points_on = np.flatnonzero(chosen[FK_TABLES[-1]])  # the points on those frames
-    sigma, alpha, weight = consts
-    out = np.empty(len(particles))
-    set_threads(threads)
-    _score_kernel(
-        particles, estimate, dims, np.cos(turned), np.sin(turned), np.cos(fixed),
-        np.sin(fixed), base_rot, base_pts, shape._offsets, frames_on, points_on,
-        np.asarray(parts, dtype=np.int64), shape.radii_array, FK_TABLES, PART_TABLES,
-        *cloud, np.asarray(expected, dtype=np.float64).reshape(-1),
-        np.array([1.0 / (2.0 * sigma * sigma), alpha, weight]), out,
-    )  # fmt: skip
-    return out
+    per area of interest and ``consts`` (sigma, alpha, support_weight). Scoring several
+    particle sets against the same rest: :class:`PartitionScorer`."""
+    scorer = PartitionScorer(estimate, dims, frames, parts, shape, cloud, expected, consts, threads)
+    return scorer(particles)
 
 
 @numba.njit(cache=True)
@@ -247,6 +312,34 @@ def part_distances(points: np.ndarray, geometry: np.ndarray) -> np.ndarray:
             r = g[14] + g[15] * min(max(s * g[16], 0.0), 1.0)
             out[n, k] = abs(np.sqrt(e * e + f * f + over * over) / r - 1.0)
     return out
+
+
+@numba.njit(cache=True)
+def nearest_areas(points: np.ndarray, geometry: np.ndarray, alpha: float) -> np.ndarray:
+    """Eq. 8 for one pose, geometry (K, G): each point's (N, 3) area of interest, 2 k +
+    half (1 from the middle of the bone on), of the part k nearest it in |d| if that is
+    under ``alpha``, else -1, (N,): the areas
+    :func:`~optrack.skeleton.likelihood.associate` gives (no baseline), to the bit."""
+    best = np.full(points.shape[0], np.inf)
+    area = np.full(points.shape[0], -1, dtype=np.int64)
+    for k in range(geometry.shape[0]):
+        g = geometry[k].astype(np.float64)
+        for n in range(points.shape[0]):
+            v0, v1, v2 = points[n, 0] - g[0], points[n, 1] - g[1], points[n, 2] - g[2]
+            s = v0 * g[3] + v1 * g[4] + v2 * g[5]
+            e = v0 * g[6] + v1 * g[7] + v2 * g[8]
+            f = v0 * g[9] + v1 * g[10] + v2 * g[11]
+            over = max(max(g[12] - s, s - g[13]), 0.0)
+            t = s * g[16]
+            r = g[14] + g[15] * min(max(t, 0.0), 1.0)
+            d = abs(np.sqrt(e * e + f * f + over * over) / r - 1.0)
+            if d < best[n]:  # the first nearest, as argmin
+                best[n] = d
+                area[n] = 2 * k + (1 if t >= 0.5 else 0)
+    for n in range(points.shape[0]):
+        if not best[n] < alpha:
+            area[n] = -1
+    return area
 
 
 @numba.njit(cache=True)

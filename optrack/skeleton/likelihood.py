@@ -176,7 +176,10 @@ def likelihood_within(
     run of points replaces them)."""
     alpha = np.float32(consts[1])
     n = px.shape[0]
-    best[:] = baseline
+    # Capped at alpha from the start: a part takes only the points it explains (within
+    # alpha, better than the baseline), so a point has an area exactly when explained.
+    for i in range(n):
+        best[i] = min(baseline[i], alpha)
     area[:] = -1
     for k in range(geometry.shape[0]):
         g = geometry[k]
@@ -189,17 +192,15 @@ def likelihood_within(
         _part_run(px[lo:hi], py[lo:hi], pz[lo:hi], best[lo:hi], area[lo:hi], g, near, far)
     total = 0.0
     for i in range(n):
-        d = min(best[i], alpha)
-        total += d * d
+        total += best[i] * best[i]
     deficit = 0.0
     for k in range(geometry.shape[0]):
         lo, hi = int(runs[2 * k]), int(runs[2 * k + 1])
-        qb, qa = best[lo:hi], area[lo:hi]
+        qa = area[lo:hi]
         near, far = 0, 0
         for i in range(hi - lo):
-            explained = qb[i] < alpha
-            near += explained & (qa[i] == 2 * k)
-            far += explained & (qa[i] == 2 * k + 1)
+            near += qa[i] == 2 * k
+            far += qa[i] == 2 * k + 1
         if expected[2 * k] > 0.0:
             deficit += max(0.0, 1.0 - near / expected[2 * k])
         if expected[2 * k + 1] > 0.0:

@@ -34,6 +34,30 @@ def test_annealing_exponent_keeps_the_survival_rate():
         assert w.sum() ** 2 / np.sum(w * w) == pytest.approx(rate * 1000, rel=0.01)
 
 
+def _bisected_exponent(ll: np.ndarray, rate: float) -> float:
+    """The reference: plain bisection in log10(beta), 60 halvings of 14 decades."""
+    centred = ll - ll.max()
+    low, high = -6.0, 8.0
+    for _ in range(60):
+        mid = 0.5 * (low + high)
+        w = np.exp(10.0**mid * centred)
+        low, high = (mid, high) if w.sum() ** 2 / np.sum(w * w) > rate * len(ll) else (low, mid)
+    return 10.0**low
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_annealing_exponent_is_the_bisected_one(seed):
+    # Spreads from a flat to a peaked likelihood, and ties at the top (the ESS cannot go
+    # below the number of tied maxima): Newton's steps land where bisection does.
+    rng = np.random.default_rng(seed)
+    spread = 10.0 ** rng.uniform(-2, 3)
+    ll = rng.normal(0.0, spread, 2000)
+    if seed % 2:
+        ll[:40] = ll.max()
+    for rate in (0.05, 0.2, 0.5, 0.8):
+        assert annealing_exponent(ll, rate) == pytest.approx(_bisected_exponent(ll, rate), rel=1e-4)
+
+
 def test_systematic_resampling_follows_the_weights():
     weights = np.array([0.5, 0.25, 0.25, 0.0])
     counts = np.bincount(

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from optrack.skeleton.filter import _take_and_diffuse, systematic_resample
-from optrack.skeleton.kernels import part_distances, segment_distances
-from optrack.skeleton.likelihood import signed_distance
+from optrack.skeleton.kernels import nearest_areas, part_distances, segment_distances
+from optrack.skeleton.likelihood import associate, signed_distance
 from optrack.skeleton.model import (
     LIMITS,
     BodyShape,
@@ -65,3 +65,16 @@ def test_distances_of_one_pose_equal_numpy():
     s = np.clip(np.sum(v * g[None, :, 3:6], axis=2), g[:, 12], g[:, 13])
     segment = np.linalg.norm(v - s[..., None] * g[None, :, 3:6], axis=2)
     np.testing.assert_allclose(segment_distances(points, geometry[0]), segment, atol=1e-12)
+
+
+@pytest.mark.parametrize("alpha", [0.3, 0.6, 1.5])
+def test_nearest_areas_equal_the_associated_ones(alpha):
+    rng = np.random.default_rng(5)
+    shape = BodyShape.from_height(1.8)
+    state = rest_state(shape, -0.4, 0.6, -2.0)
+    state[3:] += rng.normal(0.0, 0.3, D - 3)
+    points = np.concatenate([seen_cloud(state, shape, rng), rng.uniform(-2, 2, (80, 3))])
+    geometry = part_geometry(*forward_kinematics(state[None], shape), shape)
+    area = nearest_areas(points, geometry[0], alpha)
+    np.testing.assert_array_equal(area, associate(points, geometry, alpha)[1][0])
+    assert 0 < np.sum(area < 0) < len(points) and len(np.unique(area)) > 20
