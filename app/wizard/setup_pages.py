@@ -339,7 +339,7 @@ class IntrinsicsPage(WizardPage):
                 lens = (
                     ", lens good"
                     if live.lens.good
-                    else f", lens known to {known:.1f} px"
+                    else f", lens known to {known:.2f} px"
                     if math.isfinite(known)
                     else ", lens not known yet"
                 )

@@ -171,7 +171,7 @@ class IntrinsicsResult:
         row, col = np.unravel_index(int(np.argmin(self.regions)), self.regions.shape)
         turn = TURNS[int(np.argmin(self.turns))]
         uncertain = (
-            f"known to {self.uncertainty_px:.1f} px"
+            f"known to {self.uncertainty_px:.2f} px"
             if math.isfinite(self.uncertainty_px)
             else "not known yet"
         )

@@ -112,13 +112,14 @@ OPERATOR_PARAMS = register(
             ),
             Param(
                 "intrinsics_places",
-                16,
+                22,
                 min=1,
                 max=40,
                 step=1,
                 help="Places the simulated operator shows the board at for one sensor's "
                 "intrinsics (show_board), each turned another way, all over the sensor's "
-                "image (the intrinsics page calls the lens good after about 12 of them).",
+                "image (the intrinsics page calls the lens good after 12-19 of them; while it "
+                "does not, the operator goes round again).",
             ),
             Param(
                 "intrinsics_hold_s",

@@ -160,10 +160,10 @@ def test_intrinsics_page_says_where_the_board_is_missing_until_the_lens_is_good(
     unsure = lens((0.6, 0.55, 0.83, 0.7))
     cam1 = sensor("cam1", 9, False, lens=unsure)
     page.show_state(state("intrinsics", [cam1], message=unsure.advice("cam1")))
-    assert page.tile.caption == "cam1: 9 views, lens known to 0.8 px"
+    assert page.tile.caption == "cam1: 9 views, lens known to 0.83 px"
     assert page.message.text() == (
         "Show the board near the bottom-left corner of cam1's image, tilted up: the lens "
-        "is known to 0.8 px, good from 0.5 px."
+        "is known to 0.83 px, good from 0.5 px."
     )
     assert not page.lens_good("cam1")
     good = lens((0.3, 0.3, 0.42, 0.4))

@@ -40,7 +40,8 @@ SITES = {
 # The intrinsics page checks the lens after each view (OpenCV's standard deviations of fx,
 # fy, cx, cy against calibration_intrinsics.good_std_px) and says where the board is still
 # missing; the operator calibrates once the page calls the lens good (the simulated
-# operator's 16 places take about 45 s; it goes round again while the lens is not good).
+# operator's first 12-13 places take about 40 s; it goes round again while the lens is not
+# good).
 INTRINSICS_SECONDS = 240
 # The simulated person walks (the wizard's 60 s at most) until every sensor has detected
 # them this often (a sensor with fewer than calibration_refinement.min_detections = 20 is
