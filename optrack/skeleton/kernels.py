@@ -41,6 +41,7 @@ __all__ = [
 ]
 
 LANES = 32  # poses whose kinematics and geometry are computed together (vector lanes)
+GROUPS = 8  # groups of LANES poses that threads share (each makes its scratch once)
 
 
 @numba.njit(fastmath=True, inline="always")
@@ -169,23 +170,18 @@ def _score_kernel(
 ):  # fmt: skip
     estimate, cos_e, sin_e = fixed
     copy_dofs, copy_frames, copy_points = copied
-    n = particles.shape[0]
-    for c in numba.prange((n + LANES - 1) // LANES):  # LANES particles at a time
-        first = c * LANES
-        lanes = min(LANES, n - first)
-        # Only what the partition's kinematics and parts read is filled in (the estimate's
-        # numbers, frames and points it does not turn; the rest it computes).
-        xs = np.empty((D, lanes))
-        cs, sn = np.empty((D, lanes), np.float32), np.empty((D, lanes), np.float32)
+    n, k = particles.shape[0], parts.shape[0]
+    chunks = (n + LANES - 1) // LANES  # of LANES particles, scored together
+    groups = min(chunks, GROUPS)
+    for group in numba.prange(groups):  # scratch made once per group of chunks
+        # Filled in once: what the partition's kinematics and parts read but do not turn
+        # (the estimate's numbers, frames and points); zeros elsewhere, so that the
+        # lanes past the last particle compute on numbers.
+        xs = np.zeros((D, LANES))
+        cs, sn = np.zeros((D, LANES), np.float32), np.zeros((D, LANES), np.float32)
         for d in copy_dofs:
             xs[d, :], cs[d, :], sn[d, :] = estimate[d], cos_e[d], sin_e[d]
-        for j in range(dims.shape[0]):
-            d = dims[j]
-            for lane in range(lanes):
-                xs[d, lane] = particles[first + lane, d]
-                cs[d, lane], sn[d, lane] = cos_p[first + lane, j], sin_p[first + lane, j]
-        rot = np.empty(base_rot.shape + (lanes,))
-        pts = np.empty(base_pts.shape + (lanes,))
+        rot, pts = np.zeros(base_rot.shape + (LANES,)), np.zeros(base_pts.shape + (LANES,))
         for f in copy_frames:
             for r in range(3):
                 for q in range(3):
@@ -193,19 +189,27 @@ def _score_kernel(
         for q in copy_points:
             for r in range(3):
                 pts[q, r, :] = base_pts[q, r]
-        _fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, fk_tables)
-        geometry = np.empty((parts.shape[0], G, lanes), dtype=np.float32)
-        _geometry_lanes(pts, rot, parts, part_tables, radii, geometry)
+        geometry = np.empty((k, G, LANES), dtype=np.float32)
+        extents = np.empty((2 * k, LANES), dtype=np.float32)
         best, area = np.empty_like(base), np.empty(base.shape[0], dtype=np.int32)
-        extents = np.empty((2 * parts.shape[0], lanes), dtype=np.float32)
-        _extents_lanes(geometry, axis, 1.0 + consts[1], extents)
-        runs = np.empty(2 * parts.shape[0])
-        for lane in range(lanes):  # each pose's rows read in place (a copy cost more)
-            runs[:] = extents[:, lane]
-            out[first + lane] = likelihood_within(
-                px, py, pz, axis, starts, grid, base, geometry[:, :, lane], expected, consts,
-                best, area, runs,
-            )  # fmt: skip
+        runs = np.empty(2 * k)
+        for c in range(group * chunks // groups, (group + 1) * chunks // groups):
+            first = c * LANES
+            lanes = min(LANES, n - first)
+            for j in range(dims.shape[0]):
+                d = dims[j]
+                for lane in range(lanes):
+                    xs[d, lane] = particles[first + lane, d]
+                    cs[d, lane], sn[d, lane] = cos_p[first + lane, j], sin_p[first + lane, j]
+            _fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, fk_tables)
+            _geometry_lanes(pts, rot, parts, part_tables, radii, geometry)
+            _extents_lanes(geometry, axis, 1.0 + consts[1], extents)
+            for lane in range(lanes):  # each pose's rows read in place (a copy cost more)
+                runs[:] = extents[:, lane]
+                out[first + lane] = likelihood_within(
+                    px, py, pz, axis, starts, grid, base, geometry[:, :, lane], expected,
+                    consts, best, area, runs,
+                )  # fmt: skip
 
 
 def _read_rows(frames_on: np.ndarray, points_on: np.ndarray, parts: np.ndarray, dims) -> tuple:
