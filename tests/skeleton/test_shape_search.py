@@ -23,7 +23,9 @@ def test_search_in_steps_finds_the_body_estimate_shape_finds():
     steps = 0
     while not search.advance():
         steps += 1
-    candidates = 1 + len(PROPORTIONS) * sum(len(s) - 1 for s in _STEPS)
+    # Every factor of each pass (the current one scored again), then each pass's refit of
+    # the whole pose to the body found.
+    candidates = len(PROPORTIONS) * sum(len(s) for s in _STEPS) + len(_STEPS)
     assert steps == candidates * len(clouds)  # one frame's refit per step
     assert search.shape == whole
     assert all(np.array_equal(a, b) for a, b in zip(search.poses, refit, strict=True))
@@ -40,6 +42,6 @@ def test_tracker_spreads_the_estimate_over_its_updates():
     for t in range(12):
         tracker.update(seen_cloud(truth, SHAPE, rng), t / 30)
         done.append(tracker.shape_estimated)
-    # Frames 0 and 3 kept (0.1 s apart); 37 candidates x 2 frames = 74 refits, 30 per update
-    # from frame 3 on: done in the update of frame 5.
-    assert done == [False] * 5 + [True] * 7
+    # Frames 0 and 3 kept (0.1 s apart); 50 candidates x 2 frames = 100 refits, 30 per
+    # update from frame 3 on: done in the update of frame 6.
+    assert done == [False] * 6 + [True] * 6
