@@ -208,6 +208,9 @@ def intrinsics_page(qtbot, wizard, site: str, sensor: str | None):
     views = intrinsics.table.keys.index("intrinsics")
     cell = intrinsics.table.item(intrinsics.table.rows[sensor], views)
     assert cell.text().startswith("calibrated, good")
+    # The backend's state can show the result before the calibrating job has ended; Next
+    # is enabled once the page is free again (the operator waits for it too).
+    waited(qtbot, intrinsics.isComplete, 30, "the page to be free again", wizard)
     click_next(wizard)
     return lens
 
