@@ -9,7 +9,7 @@ in every array, so that each step is one vector operation over the group (a pose
 chain of small rotations, done one pose at a time, is scalar code); the likelihood
 then scores the group's poses one by one.
 
-:func:`score_particles` is tested equal to the plain path
+:class:`PartitionScorer` is tested equal to the plain path
 (:func:`~optrack.skeleton.model.forward_kinematics`,
 :func:`~optrack.skeleton.model.part_geometry` and
 :func:`~optrack.skeleton.likelihood.log_likelihood_numpy` on the composed states) in
@@ -36,7 +36,6 @@ __all__ = [
     "PartitionScorer",
     "nearest_areas",
     "part_distances",
-    "score_particles",
     "segment_distances",
 ]
 
@@ -230,9 +229,16 @@ def _read_rows(frames_on: np.ndarray, points_on: np.ndarray, parts: np.ndarray, 
 
 
 class PartitionScorer:
-    """:func:`score_particles` with everything that does not depend on the particles
-    made once: an anneal scores the same partition against the same estimate and cloud
-    in every layer (see :func:`score_particles` for the arguments)."""
+    """Log-likelihood (eq. 9) of particles of a partition: ``scorer(particles)`` (P, D)
+    gives (P,).
+
+    A particle's pose is ``estimate`` with the numbers ``dims`` taken from the particle;
+    ``frames`` are the frames those numbers turn (the rest are the estimate's); scored
+    are the ``parts`` (indices) against ``cloud``
+    (:func:`~optrack.skeleton.likelihood.sorted_points`), with ``expected`` (K, 2) points
+    per area of interest and ``consts`` (sigma, alpha, support_weight). Everything that
+    does not depend on the particles is made once: an anneal scores the same partition
+    against the same estimate and cloud in every layer."""
 
     def __init__(
         self,
@@ -275,29 +281,18 @@ class PartitionScorer:
         return out
 
 
-def score_particles(
-    particles: np.ndarray,
-    estimate: np.ndarray,
-    dims: tuple[int, ...],
-    frames: tuple[str, ...],
-    parts: np.ndarray,
-    shape: BodyShape,
-    cloud: tuple,
-    expected: np.ndarray,
-    consts: tuple[float, float, float],
-    threads: int = 1,
-) -> np.ndarray:
-    """Log-likelihood (eq. 9) of each particle (P, D) of a partition, (P,).
-
-    A particle's pose is ``estimate`` with the numbers ``dims`` taken from the particle;
-    ``frames`` are the frames those numbers turn (the rest are the estimate's); scored
-    are the ``parts`` (indices) against ``cloud``
-    (:func:`~optrack.skeleton.likelihood.sorted_points`, made once for all the layers of
-    an anneal), with ``expected`` (K, 2) points
-    per area of interest and ``consts`` (sigma, alpha, support_weight). Scoring several
-    particle sets against the same rest: :class:`PartitionScorer`."""
-    scorer = PartitionScorer(estimate, dims, frames, parts, shape, cloud, expected, consts, threads)
-    return scorer(particles)
+@numba.njit(cache=True, inline="always")
+def _distance(points, n, g):
+    """|d| of eq. 7 of point n to the part of row g (float64), and its coordinate along
+    the bone in bone lengths."""
+    v0, v1, v2 = points[n, 0] - g[0], points[n, 1] - g[1], points[n, 2] - g[2]
+    s = v0 * g[3] + v1 * g[4] + v2 * g[5]
+    e = v0 * g[6] + v1 * g[7] + v2 * g[8]
+    f = v0 * g[9] + v1 * g[10] + v2 * g[11]
+    over = max(max(g[12] - s, s - g[13]), 0.0)
+    t = s * g[16]
+    r = g[14] + g[15] * min(max(t, 0.0), 1.0)
+    return abs(np.sqrt(e * e + f * f + over * over) / r - 1.0), t
 
 
 @numba.njit(cache=True)
@@ -308,13 +303,7 @@ def part_distances(points: np.ndarray, geometry: np.ndarray) -> np.ndarray:
     for k in range(geometry.shape[0]):
         g = geometry[k].astype(np.float64)
         for n in range(points.shape[0]):
-            v0, v1, v2 = points[n, 0] - g[0], points[n, 1] - g[1], points[n, 2] - g[2]
-            s = v0 * g[3] + v1 * g[4] + v2 * g[5]
-            e = v0 * g[6] + v1 * g[7] + v2 * g[8]
-            f = v0 * g[9] + v1 * g[10] + v2 * g[11]
-            over = max(max(g[12] - s, s - g[13]), 0.0)
-            r = g[14] + g[15] * min(max(s * g[16], 0.0), 1.0)
-            out[n, k] = abs(np.sqrt(e * e + f * f + over * over) / r - 1.0)
+            out[n, k] = _distance(points, n, g)[0]
     return out
 
 
@@ -329,14 +318,7 @@ def nearest_areas(points: np.ndarray, geometry: np.ndarray, alpha: float) -> np.
     for k in range(geometry.shape[0]):
         g = geometry[k].astype(np.float64)
         for n in range(points.shape[0]):
-            v0, v1, v2 = points[n, 0] - g[0], points[n, 1] - g[1], points[n, 2] - g[2]
-            s = v0 * g[3] + v1 * g[4] + v2 * g[5]
-            e = v0 * g[6] + v1 * g[7] + v2 * g[8]
-            f = v0 * g[9] + v1 * g[10] + v2 * g[11]
-            over = max(max(g[12] - s, s - g[13]), 0.0)
-            t = s * g[16]
-            r = g[14] + g[15] * min(max(t, 0.0), 1.0)
-            d = abs(np.sqrt(e * e + f * f + over * over) / r - 1.0)
+            d, t = _distance(points, n, g)
             if d < best[n]:  # the first nearest, as argmin
                 best[n] = d
                 area[n] = 2 * k + (1 if t >= 0.5 else 0)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from optrack.skeleton.filter import PARTITION_FRAMES, PARTITION_PARTS
-from optrack.skeleton.kernels import LANES, score_particles
+from optrack.skeleton.kernels import LANES, PartitionScorer
 from optrack.skeleton.likelihood import log_likelihood_numpy, sorted_points
 from optrack.skeleton.model import (
     PARTITIONS,
@@ -58,10 +58,12 @@ def test_fused_score_equals_kinematics_geometry_and_the_numpy_likelihood(
     shape, estimate, points, particles, expected, baseline = _case(partition, seed, count)
     dims, parts = PARTITIONS[partition], PARTITION_PARTS[partition]
     consts = (0.15, 0.6, 0.5)
-    fast = score_particles(
-        particles, estimate, dims, PARTITION_FRAMES[partition], parts, shape,
+    scorer = PartitionScorer(
+        estimate, dims, PARTITION_FRAMES[partition], parts, shape,
         sorted_points(points, baseline), expected[parts], consts, threads=threads,
     )  # fmt: skip
+    fast = scorer(particles)
+    np.testing.assert_array_equal(scorer(particles[::-1]), fast[::-1])  # made once, reused
     plain = _plain(
         shape, estimate, points, particles, dims, parts, expected[parts], baseline, consts
     )
@@ -73,10 +75,10 @@ def test_fused_score_equals_kinematics_geometry_and_the_numpy_likelihood(
 def test_fused_score_of_a_subset_of_parts():
     shape, estimate, points, particles, expected, _ = _case("torso", 5, 100)
     parts, consts = _TORSO_AND_LEGS, (0.2, 0.5, 0.3)
-    fast = score_particles(
-        particles, estimate, PARTITIONS["torso"], PARTITION_FRAMES["torso"], parts, shape,
+    fast = PartitionScorer(
+        estimate, PARTITIONS["torso"], PARTITION_FRAMES["torso"], parts, shape,
         sorted_points(points, None), expected[parts], consts,
-    )  # fmt: skip
+    )(particles)  # fmt: skip
     plain = _plain(shape, estimate, points, particles, PARTITIONS["torso"], parts,
                    expected[parts], None, consts)  # fmt: skip
     np.testing.assert_allclose(fast, plain, atol=2e-4)
