@@ -305,8 +305,8 @@ class IntrinsicsPage(WizardPage):
             + (
                 result.advice(sensor)
                 if result.good
-                else f"Not good yet: {result.advice(sensor)} Start the capture again with "
-                "more views, or Next uses this lens anyway."
+                else f"Not good yet: {result.advice(sensor)} Start capture again (it starts "
+                "from no views) and follow the line below, or Next uses this lens anyway."
             )
         )
         self._rows()
