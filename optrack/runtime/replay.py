@@ -244,13 +244,22 @@ class LiveReplay(Sensor):
 
     def seek(self, played: float) -> None:
         """Move a paused playhead to ``played`` s of recording time since the replay began
-        (over loops: the ``played`` of :meth:`playhead`); the next frame is the first after it."""
+        (over loops: the ``played`` of :meth:`playhead`). As a video player shows the picture
+        at a seek, the frame at the new playhead is delivered once, unless it is the frame
+        last delivered (a node that lagged behind its peers is then shown the same instant
+        as they are); the frame after it comes with the next step."""
         self.open()
         with self._control:
             if self._paused_at is None:
                 raise SensorError(f"{self.uri} is playing; pause it before seeking.")
             self._epoch = self._paused_at - played / self.speed
-            self._next = self._last_due(self._paused_at) + 1
+            at = self._last_due(self._paused_at)
+            if at >= 0 and at != self._next - 1:
+                self._next = at
+                self._steps += 1
+                self._control.notify_all()
+            else:
+                self._next = at + 1
             self._seeks += 1
 
     def playhead(self) -> float:

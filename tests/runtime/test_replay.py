@@ -139,3 +139,53 @@ def test_a_frame_already_too_old_is_skipped_for_the_next_one(venue):
     assert replay.skipped == 5
     clock.t = replay._due(9) + 0.005  # 5 ms old: fresh enough
     assert replay.read().seq == 9
+
+
+def test_paused_a_replay_holds_and_a_step_gives_the_next_frame(venue):
+    clock = FakeClock()
+    replay = LiveReplay(venue, "kinect2_0", clock=clock, streams=("depth",))
+    replay.open()
+    clock.t = replay._due(3)
+    assert replay.read().seq == 3
+    replay.pause()
+    clock.t += 5.0  # paused time does not move the playhead
+    assert replay.held and replay.playhead() == pytest.approx(replay.times[3], abs=1e-6)
+    replay.step()
+    assert not replay.held
+    assert replay.read().seq == 4
+    assert replay.held  # one frame a step
+    with pytest.raises(SensorError, match="pause it before seeking"):
+        LiveReplay(venue, "kinect2_0", clock=clock, streams=("depth",)).seek(1.0)
+
+
+def test_a_seek_shows_a_lagging_replay_the_frame_at_the_new_playhead(venue):
+    """A detector node busy with its first frame while its peers played on: pausing aligns
+    every playhead on the furthest one, and the lagging node is then given the frame at
+    that instant (not left showing its first), and the frame after it on the next step."""
+    clock = FakeClock()
+    replay = LiveReplay(venue, "kinect2_1", clock=clock, streams=("depth",))
+    replay.open()
+    assert replay.read().seq == 0
+    clock.t += 1.2
+    replay.pause()
+    furthest = replay.times[30] + 0.1 * replay.period  # the peers' playhead
+    replay.seek(furthest)
+    assert not replay.held
+    shown = replay.read()
+    assert shown.seq == 30
+    assert replay.held
+    replay.step()
+    assert replay.read().seq == 31
+
+
+def test_a_seek_to_the_frame_already_shown_delivers_nothing_again(venue):
+    clock = FakeClock()
+    replay = LiveReplay(venue, "kinect2_2", clock=clock, streams=("depth",))
+    replay.open()
+    clock.t = replay._due(12) + 0.2 * replay.period
+    assert replay.read().seq == 12
+    replay.pause()
+    replay.seek(replay.playhead())  # the furthest node: already at its playhead
+    assert replay.held
+    replay.step()
+    assert replay.read().seq == 13
