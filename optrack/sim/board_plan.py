@@ -169,7 +169,7 @@ def plan_board_steps(
         steps = [step for i in range(len(views)) if (step := _held_step(room, (i,), centers))]
     if spec.steps != "floor":
         steps += _pair_steps(room, centers)
-    return steps + _floor_steps(room, grid, spec.floor_placements)
+    return steps + _floor_steps(room, grid, spec.floor_placements, spec.floor_per_sensor)
 
 
 def _pair_steps(room: _Room, centers: np.ndarray) -> list[BoardStep]:
@@ -239,27 +239,37 @@ def _held_step(room: _Room, subset: tuple[int, ...], centers: np.ndarray) -> Boa
     return None
 
 
-def _floor_steps(room: _Room, grid: np.ndarray, count: int) -> list[BoardStep]:
-    """Up to ``count`` placements lying on the floor (spots of ``grid``, Nx2), seen by as
-    many sensors as possible, spread out.
+def _floor_steps(room: _Room, grid: np.ndarray, count: int, per_sensor: int = 0) -> list[BoardStep]:
+    """At least ``count`` placements lying on the floor (spots of ``grid``, Nx2), and more
+    until every sensor that can see the floor has seen the board on it at ``per_sensor``
+    of them; seen by as many sensors as possible, as sharply as possible, spread out.
 
-    Greedy: each placement is worth 1 / (1 + placements it already has) per sensor that
-    sees it, so the floor is shown to every sensor that can see it, not only to the
-    best-placed ones (the low-resolution ones see the floor only near them)."""
+    The floor's tilt in a camera comes from the boards that camera (or one near it) sees
+    on the floor: a board far off, seen at a grazing angle, gives its plane to a few
+    tenths of a degree, and one such board per camera tilted the floor of the default
+    site enough to put a camera 6 m away 2 cm off in height. Greedy: each placement is
+    worth, per sensor that sees it, its sharpness (the square size it sees, up to
+    ``square_px_wanted``) over 1 + the placements that sensor already has, so the floor
+    is shown to every sensor that can see it, where it sees it best."""
     params, board = room.params, room.board
     floor = grid[
         room.venue.is_free(grid, float(np.max(board.hi - board.lo)) / 2 + params.spot_clearance)
     ]
     centers = np.column_stack([floor, np.full(len(floor), float(params.thickness))])
     rotations = facing_rotations(np.tile([0.0, 0.0, 1.0], (len(floor), 1)))
-    seen = np.stack(
-        [_square_pixels(v, rotations, centers, board, params, True) > 0 for v in room.views]
+    sizes = np.stack(
+        [_square_pixels(v, rotations, centers, board, params, True) for v in room.views]
     )
+    seen = sizes > 0
+    sharp = np.minimum(sizes, float(params.square_px_wanted)) / float(params.square_px_wanted)
     placed = np.zeros(len(room.views))
     open_ = seen.any(axis=0)
     steps: list[BoardStep] = []
-    while len(steps) < count and open_.any():
-        score = np.where(open_, (seen / (1.0 + placed[:, None])).sum(axis=0), -np.inf)
+    while open_.any():
+        if len(steps) >= count:  # then only spots a sensor still short of per_sensor sees
+            short = placed < per_sensor
+            open_ &= seen[short].any(axis=0)
+        score = np.where(open_, (sharp / (1.0 + placed[:, None])).sum(axis=0), -np.inf)
         step = None
         for c in np.lexsort((np.arange(len(floor)), -score)):
             if not open_[c]:

@@ -10,7 +10,8 @@ scenario (same venue, same sensors, so the same true poses) with an operator
 doing what the calibration wizard asks: carrying the board to places where
 each sensor and each neighbouring pair sees it (``move_board``), showing it to
 one ``sensor`` all over its image, turned many ways (``show_board``, the
-intrinsics page), laying it on the floor at ``floor_places`` places
+intrinsics page), laying it on the floor at ``floor_places`` places at least,
+and more until each sensor that can see the floor saw it at ``floor_per_sensor``
 (``lay_board``), or one person walking through every view (``walk``);
 ``people`` goes back to the site's own sensors (the venue). The board is the
 command's, else the site scenario's; a scene without a board to carry is
@@ -83,7 +84,17 @@ OPERATOR_PARAMS = register(
                 min=1,
                 max=10,
                 step=1,
-                help="Places the simulated operator lays the board at (the ground page).",
+                help="Places the simulated operator lays the board at (the ground page), at least.",
+            ),
+            Param(
+                "floor_per_sensor",
+                3,
+                min=0,
+                max=10,
+                step=1,
+                help="The simulated operator lays the board at more places until every "
+                "sensor that can see the floor has seen it at this many (a camera that saw "
+                "the board on the floor once, far off, can tilt the whole floor).",
             ),
             Param(
                 "walk_margin",
@@ -486,6 +497,7 @@ class SimulatedOperator:
                 rows=board.rows,
                 square=board.square,
                 floor_placements=order.places if action == "lay_board" else 0,
+                floor_per_sensor=int(p.floor_per_sensor) if action == "lay_board" else 0,
                 intrinsics_sensor=order.shown,
                 intrinsics_placements=int(p.intrinsics_places),
                 steps=steps,

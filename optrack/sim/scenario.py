@@ -222,6 +222,9 @@ class BoardSpec(_Spec):
     rows: int = 5
     square: float = 0.12
     floor_placements: int = 3
+    # More floor placements, until every sensor that can see the floor has seen
+    # the board on it at this many (0: floor_placements only); the simulated operator's.
+    floor_per_sensor: int = 0
     # (added) Intrinsics: the operator shows the board to this sensor alone (its index),
     # at ``intrinsics_placements`` places across its image, each turned another way,
     # instead of the network procedure; -1: the network procedure.
