@@ -5,12 +5,14 @@ The checkerboard's views are millimetre evidence, a walker's detections
 centimetre evidence: a sensor's walk correction is applied only while that
 sensor's checkerboard views still agree with it (their reprojection RMS grows
 by at most ``calibration_live.refinement_board_growth``); else the sensor keeps
-the checkerboard's pose and the report says so (``refused``).
+the checkerboard's pose and the report says so (``refused``). When the corrections
+left make the sensors disagree more than none would, none is applied.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Mapping, Sequence
 
 import msgspec
@@ -128,6 +130,11 @@ def refine_walk(
     if refused:
         moved = {s: tr for s, tr in after.items() if s in result.corrections}
         error_after = alignment_error(moved, float(p.max_gap))
+    if error_after > result.error_before_m:
+        # The corrections left (the others refused) make the sensors disagree more than
+        # none: every sensor keeps the checkerboard's pose.
+        refused.update({s: board_after.get(s, math.nan) for s in corrections})
+        corrections, after, error_after = {}, dict(trajectories), result.error_before_m
     refined = base
     for sid, correction in corrections.items():
         refined = refined.with_pose(sid, correction @ base.pose(sid))
