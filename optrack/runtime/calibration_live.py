@@ -244,11 +244,17 @@ class LiveCalibration:
             return
         if sensor is not None and (lens := state.sensors[sensor].lens) is not None and lens.good:
             return
-        rates = [v.capture_hz for v in state.sensors.values() if v.capture_hz > 0]
-        hold = float(self.params.operator_searches) / min(rates) if rates else 0.0
-        sentence = operator.act(phase, self.board, sensor, min(hold, 60.0))
+        hold = self._searches_hold(state)
+        sentence = operator.act(phase, self.board, sensor, hold)
         self.session.say(sentence)
         log.info("the simulated operator goes round again (%s, hold %.1f s)", phase, hold)
+
+    def _searches_hold(self, state: LiveState) -> float:
+        """How long the operator holds the board for ``calibration_live.operator_searches``
+        searches of the slowest node capturing now (0: no node captures)."""
+        rates = [v.capture_hz for v in state.sensors.values() if v.capture_hz > 0]
+        hold = float(self.params.operator_searches) / min(rates) if rates else 0.0
+        return min(hold, 60.0)
 
     # ---------------------------------------------------------------- phases
     def start(self, phase: str, sensor: str | None = None) -> None:
@@ -261,9 +267,12 @@ class LiveCalibration:
         :meth:`refine`. A UserError sentence on failure (unknown phase or sensor, a node
         that refuses or does not answer)."""
         self.session.check_phase(phase, sensor)
+        # The floor's places need one sensor's still view each: the board lies there long
+        # enough for the searches of the slowest node as it captured until now.
+        hold = self._searches_hold(self.session.state()) if phase == "floor" else 0.0
         self.stop()
         if self.operator is not None:
-            self.session.say(self.operator.act(phase, self.board, sensor))
+            self.session.say(self.operator.act(phase, self.board, sensor, hold))
             self.operator.wait()
         self.session.begin(phase, sensor)
         if phase == "refinement":

@@ -284,7 +284,18 @@ def _floor_steps(room: _Room, grid: np.ndarray, count: int, per_sensor: int = 0)
                 break
         if step is None:
             break
-    return steps
+    return _nearest_next(steps)
+
+
+def _nearest_next(steps: list[BoardStep]) -> list[BoardStep]:
+    """The placements from the first, each next the nearest one left (a short walk)."""
+    tour, left = steps[:1], steps[1:]
+    while left:
+        here = tour[-1].operator_spot
+        tour.append(
+            left.pop(int(np.argmin([np.linalg.norm(s.operator_spot - here) for s in left])))
+        )
+    return tour
 
 
 def _floor_step(

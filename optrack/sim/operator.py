@@ -122,6 +122,16 @@ OPERATOR_PARAMS = register(
                 "(a few searches of every node must fall in it; slow computers need longer).",
             ),
             Param(
+                "floor_hold_s",
+                2.5,
+                min=0.5,
+                max=60.0,
+                unit="s",
+                help="The simulated operator leaves the board lying still this long at each "
+                "floor place (one sensor's still view is enough there; the wizard asks "
+                "for longer where the nodes search their images slowly).",
+            ),
+            Param(
                 "intrinsics_places",
                 22,
                 min=1,
@@ -515,7 +525,8 @@ class SimulatedOperator:
         # whole or not at all: detector nodes load the scene as soon as the file appears
         atomic_write_text(path, yaml.safe_dump(data, sort_keys=False))
         # at least the operator's own hold (longer when asked: slow nodes)
-        hold = max(order.hold, float(p.intrinsics_hold_s if action == "show_board" else p.hold_s))
+        own = {"show_board": p.intrinsics_hold_s, "lay_board": p.floor_hold_s}
+        hold = max(order.hold, float(own.get(action, p.hold_s)))
         planned = self._check_steps(path, hold) if spec is not None else 0.0
         start = time.time() + float(p.lead_s)
         if planned:

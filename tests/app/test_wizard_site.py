@@ -248,6 +248,8 @@ def extrinsics_page(qtbot, wizard, truth, sensor: str | None, lens) -> None:
     print(
         "shared board poses: "
         + ", ".join(f"{s} {v.shared_poses}" for s, v in sorted(state.sensors.items()))
+        + "; searches a second: "
+        + ", ".join(f"{s} {v.capture_hz:.1f}" for s, v in sorted(state.sensors.items()))
     )
     for name, live in state.sensors.items():  # calibrated on two shared board poses at least
         assert live.settled and live.shared_poses >= live.shared_needed >= 2, name
