@@ -53,6 +53,12 @@ WALK_DETECTIONS = 30
 # this (people detections are centimetre-noisy; the board's calibration is millimetre-exact).
 REFINE_SLACK_M = 0.01
 REFINE_SLACK_DEG = 0.2
+# Page 5 is optional: the walk and its refinement on the default site (the newcomer's run)
+# and on four sensors (where some sensors' corrections are refused and the others' must
+# not make the sensors disagree more); the two- and six-sensor sites go on without
+# walking, which keeps the checkerboard's calibration (that path checked on real sites;
+# the walk's 20-25 s and its detections spared on the slowest site).
+WALKED = ("default", "four")
 # Issue 18's target: every camera within 2 cm and 0.3 degree of the truth, on every site
 # (on the two-sensor site with the lens page 2 calibrated for cam0).
 TARGET = (0.02, 0.3)
@@ -356,15 +362,28 @@ def refinement_page(qtbot, wizard, truth, solved):
     return report
 
 
+def no_walk(wizard) -> None:
+    """5. Refinement skipped: Next without walking keeps the checkerboard's calibration."""
+    refinement = wizard.refinement_page
+    assert wizard.currentPage() is refinement
+    assert refinement.report is None and not refinement.walking
+    click_next(wizard)
+
+
 def review_page(qtbot, wizard, truth, report, tmp_path):
-    """6. Review: save (twice: the first file is kept as a backup), export, send."""
+    """6. Review: save (twice: the first file is kept as a backup), export, send
+    (``report``: the walk's refinement, None when page 5 was skipped)."""
     review = wizard.review_page
     assert wizard.currentPage() is review
     waited(qtbot, lambda: review.table.rowCount() == len(truth), 30, "the review", wizard)
-    assert "refined from a walk" in review.summary.text()
+    if report is None:
+        assert "not refined" in review.summary.text()
+        assert all(review.table.text(s, "refinement") == "not refined" for s in truth)
+    else:
+        assert "refined from a walk" in review.summary.text()
     for sensor in truth:  # a sensor the walk did not move says why
         kept = review.table.text(sensor, "refinement") == "kept the board's pose"
-        assert kept == (sensor in report.refused)
+        assert kept == (report is not None and sensor in report.refused)
     assert "the world's origin is on the floor" in review.summary.text()
     path = tmp_path / "calibration.yaml"
     review.save_to(str(path))
@@ -396,11 +415,15 @@ def test_the_wizard_calibrates_the_simulated_site_from_page_1_to_finish(qtbot, w
     lens = intrinsics_page(qtbot, wizard, site, sensor)
     extrinsics_page(qtbot, wizard, truth, sensor, lens)
     solved = floor_page(qtbot, wizard, truth)
-    report = refinement_page(qtbot, wizard, truth, solved)
+    if site in WALKED:
+        report = refinement_page(qtbot, wizard, truth, solved)
+    else:
+        report = no_walk(wizard)
     path = review_page(qtbot, wizard, truth, report, tmp_path)
     wizard.button(wizard.WizardButton.FinishButton).click()
     assert not wizard.isVisible()
-    print(f"{site} site: page 1 to Finish in {time.monotonic() - started:.0f} s")
+    took = time.monotonic() - started
+    print(f"{site} site: page 1 to Finish in {took:.0f} s (issue 18's target: 240 s)")
 
     saved = load_calibration(path)
     assert (tmp_path / "calibration.yaml.bak").is_file()
@@ -420,10 +443,12 @@ def test_the_wizard_calibrates_the_simulated_site_from_page_1_to_finish(qtbot, w
             (lens.intrinsics.fx, lens.intrinsics.cy)
         )
     # The refined calibration was saved: each sensor's walk correction, or none where the
-    # checkerboard's pose was kept.
+    # checkerboard's pose was kept (every sensor's without a walk).
+    final = report.calibration if report is not None else wizard.solved
+    corrected = report.corrections if report is not None else {}
     for name, entry in saved.sensors.items():
-        assert (entry.refinement is not None) == (name in report.corrections)
-        assert np.allclose(entry.pose, report.calibration.pose(name), atol=1e-6)
+        assert (entry.refinement is not None) == (name in corrected)
+        assert np.allclose(entry.pose, final.pose(name), atol=1e-6)
     position_m, rotation_deg = TARGET
     assert errors.max_position_error_m <= position_m, errors.as_dict()
     assert errors.max_rotation_error_deg <= rotation_deg, errors.as_dict()
