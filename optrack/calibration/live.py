@@ -120,16 +120,6 @@ LIVE_PARAMS = register(
                 "the slowest node, at least its own hold.",
             ),
             Param(
-                "floor_searches",
-                2,
-                min=1,
-                max=20,
-                step=1,
-                help="The floor phase starts the simulated operator with the board lying "
-                "long enough at each place for this many searches of the slowest node (one "
-                "sensor's two still searches make a floor view), at least its own hold.",
-            ),
-            Param(
                 "min_shared_poses",
                 2,
                 min=1,
