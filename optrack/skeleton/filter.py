@@ -20,9 +20,8 @@ import numpy as np
 from optrack.params import Params
 from optrack.skeleton.kernels import (
     PartitionScorer,
+    limb_points,
     nearest_areas,
-    part_distances,
-    segment_distances,
 )
 from optrack.skeleton.likelihood import sorted_points
 from optrack.skeleton.model import (
@@ -63,6 +62,8 @@ PARTITION_FRAMES: dict[str, tuple[str, ...]] = {
     "left_leg": ("left_hip", "left_knee"),
     "right_leg": ("right_hip", "right_knee"),
 }
+# The parts fixed while a partition is scored: every other partition's.
+_OTHERS = {name: np.array([part.partition != name for part in PARTS]) for name in PARTITIONS}
 _ROOT_JOINT = {"left_arm": 4, "right_arm": 7, "left_leg": 10, "right_leg": 13}
 _YAW = 3
 # The root numbers the motion model predicts by their velocity: where the person goes and
@@ -207,6 +208,8 @@ class SkeletonFilter:
         self.estimate = np.zeros(D)
         self.particles = np.zeros((int(self.params.particles), D))
         self._areas = part_areas(shape)
+        # How far each limb reaches from its root joint (m), bones and extensions.
+        self._reach = {name: part_reach(shape, PARTITION_PARTS[name]) for name in _ROOT_JOINT}
         # The root's velocity (x, y in m/s, heading in rad/s), smoothed over frames.
         self.velocity = np.zeros(len(_MOVING))
         # Each area's support at the estimate's last fit (K, 2); None before one.
@@ -279,14 +282,15 @@ class SkeletonFilter:
         p = self.params
         dims = PARTITIONS[partition]
         parts = PARTITION_PARTS[partition] if parts is None else np.asarray(parts)
-        scored, baseline = self._scored_points(points, partition, gate)
+        base = forward_kinematics(self.estimate, self.shape)
+        scored, baseline = self._scored_points(points, partition, gate, base)
         shown = len(scored) if partition == "torso" else len(points)
         expected = self.expected_support(shown)[parts]
         idx = np.array(dims)
         consts = (float(p.sigma), float(p.alpha), float(p.support_weight))
         scorer = PartitionScorer(
             self.estimate, dims, PARTITION_FRAMES[partition], parts, self.shape,
-            sorted_points(scored, baseline), expected, consts, int(p.threads),
+            sorted_points(scored, baseline), expected, consts, int(p.threads), base,
         )  # fmt: skip
         low, high = LIMITS[idx].T
         for layer in range(layers):
@@ -305,28 +309,26 @@ class SkeletonFilter:
             delta = self.particles[:, _YAW] - self.estimate[_YAW]
             self.particles[:, _YAW] = self.estimate[_YAW] + np.angle(np.exp(1j * delta))
 
-    def _scored_points(self, points: np.ndarray, partition: str, gate: bool):
-        """The points a partition is scored on and their baseline (None for the torso)."""
+    def _scored_points(self, points: np.ndarray, partition: str, gate: bool, base: tuple):
+        """The points a partition is scored on and their baseline (None for the torso);
+        ``base``: the estimate's forward kinematics."""
         p = self.params
         if partition == "torso":
             keep = int(p.torso_points)
             if len(points) > keep:
                 points = points[self.rng.choice(len(points), keep, replace=False)]
             return points, None
-        base = forward_kinematics(self.estimate, self.shape)
+        body = part_geometry(base[0][None], base[1][None], self.shape)[0]
+        parts = PARTITION_PARTS[partition]
         # Every other partition's parts, at the estimate: a limb does not take the points
         # another limb holds (searched first, the left arm took the right arm's points).
-        fixed = np.array([k for k, part in enumerate(PARTS) if part.partition != partition])
-        body = part_geometry(base[0][None], base[1][None], self.shape)
-        distance = part_distances(points, body[0])  # (N, K)
-        baseline = np.minimum(distance[:, fixed].min(axis=1), float(p.alpha))
-        parts = PARTITION_PARTS[partition]
-        if gate:  # near where the limb was, or explained by no part of the estimate
-            near = segment_distances(points, body[0, parts]).min(axis=1) < float(p.limb_gate)
-            near |= distance.min(axis=1) >= float(p.alpha)
-        else:
-            reach = part_reach(self.shape, parts) + float(p.reach_margin)
-            near = np.linalg.norm(points - base[0][_ROOT_JOINT[partition]], axis=1) < reach
+        # Tracking: near where the limb was, or explained by no part of the estimate.
+        gate_m = float(p.limb_gate) if gate else 0.0
+        reach = 0.0 if gate else self._reach[partition] + float(p.reach_margin)
+        baseline, near = limb_points(
+            np.asarray(points, dtype=np.float64), body, _OTHERS[partition], parts,
+            float(p.alpha), gate_m, base[0][_ROOT_JOINT[partition]], reach,
+        )  # fmt: skip
         keep = near & (baseline > float(p.explained_skip))
         return points[keep], baseline[keep]
 

@@ -18,10 +18,12 @@ tests/skeleton/test_likelihood_kernels.py.
 
 from __future__ import annotations
 
+import functools
+
 import numba
 import numpy as np
 
-from optrack.skeleton.likelihood import likelihood_within, set_threads
+from optrack.skeleton.likelihood import likelihood_within, set_threads, signed_distance
 from optrack.skeleton.model import (
     FK_TABLES,
     FRAMES,
@@ -34,9 +36,9 @@ from optrack.skeleton.model import (
 
 __all__ = [
     "PartitionScorer",
+    "limb_points",
+    "limb_points_numpy",
     "nearest_areas",
-    "part_distances",
-    "segment_distances",
 ]
 
 LANES = 32  # poses whose kinematics and geometry are computed together (vector lanes)
@@ -211,21 +213,29 @@ def _score_kernel(
                 )  # fmt: skip
 
 
-def _read_rows(frames_on: np.ndarray, points_on: np.ndarray, parts: np.ndarray, dims) -> tuple:
-    """What a partition's kernel reads but does not compute: the estimate's numbers (the
-    root's position and the angles of the frames it turns, less its own ``dims``), the
-    frames and the points (parents of those it turns, and the parts' ends and frames)."""
+@functools.lru_cache(maxsize=64)
+def _layout(frames: tuple[str, ...], parts: tuple[int, ...], dims: tuple[int, ...]) -> tuple:
+    """A partition's index arrays, made once: its ``dims``, ``parts``, the frames it
+    turns, the points on those frames, and what its kernel reads but does not compute:
+    the estimate's numbers (the root's position and the angles of the frames it turns,
+    less its own ``dims``), the frames and the points (parents of those it turns, and
+    the parts' ends and frames). Shared: read, never written."""
+    turned = np.array([name in frames for name in FRAMES])
+    frames_on = np.flatnonzero(turned)
+    points_on = np.flatnonzero(turned[FK_TABLES[-1]])  # the points on those frames
     fparent, fdof, _, _, pparent, pframe = FK_TABLES
     pa, pb, pf = PART_TABLES[:3]
-    dofs = {0, 1, 2} | {int(d) for d in fdof[frames_on].ravel() if d >= 0}
-    frames = {int(fparent[f]) for f in frames_on} | {int(pframe[q]) for q in points_on}
-    frames |= {int(pf[k]) for k in parts}
+    rows = {0, 1, 2} | {int(d) for d in fdof[frames_on].ravel() if d >= 0}
+    read = {int(fparent[f]) for f in frames_on} | {int(pframe[q]) for q in points_on}
+    read |= {int(pf[k]) for k in parts}
     points = {int(pparent[q]) for q in points_on} | {int(pa[k]) for k in parts}
     points |= {int(pb[k]) for k in parts}
-    return tuple(
+    copied = tuple(
         np.array(sorted(chosen - set(own) - {-1}), dtype=np.int64)
-        for chosen, own in ((dofs, dims), (frames, frames_on), (points, points_on))
+        for chosen, own in ((rows, dims), (read, frames_on), (points, points_on))
     )
+    index = np.array(dims, dtype=np.int64), np.array(parts, dtype=np.int64)
+    return (*index, frames_on, points_on, copied)
 
 
 class PartitionScorer:
@@ -238,7 +248,8 @@ class PartitionScorer:
     (:func:`~optrack.skeleton.likelihood.sorted_points`), with ``expected`` (K, 2) points
     per area of interest and ``consts`` (sigma, alpha, support_weight). Everything that
     does not depend on the particles is made once: an anneal scores the same partition
-    against the same estimate and cloud in every layer."""
+    against the same estimate and cloud in every layer (``base``: the estimate's
+    :func:`~optrack.skeleton.model.forward_kinematics`, where the caller has it)."""
 
     def __init__(
         self,
@@ -251,21 +262,20 @@ class PartitionScorer:
         expected: np.ndarray,
         consts: tuple[float, float, float],
         threads: int = 1,
+        base: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> None:
         estimate = np.asarray(estimate, dtype=np.float64)
-        base_pts, base_rot = forward_kinematics(estimate, shape)
-        self.dims = np.asarray(dims, dtype=np.int64)
-        parts = np.asarray(parts, dtype=np.int64)
-        chosen = np.array([name in frames for name in FRAMES])
-        frames_on = np.flatnonzero(chosen)
-        points_on = np.flatnonzero(chosen[FK_TABLES[-1]])  # the points on those frames
+        base_pts, base_rot = forward_kinematics(estimate, shape) if base is None else base
+        self.dims, parts, frames_on, points_on, copied = _layout(
+            tuple(frames), tuple(int(k) for k in np.asarray(parts)), tuple(int(d) for d in dims)
+        )
         # Sines and cosines in float32 by numpy's vector path, as forward_kinematics does.
         fixed = estimate.astype(np.float32)
         sigma, alpha, weight = consts
         self.threads = int(threads)
         self._args = (
             (estimate, np.cos(fixed), np.sin(fixed)),
-            _read_rows(frames_on, points_on, parts, self.dims), base_rot, base_pts,
+            copied, base_rot, base_pts,
             shape._offsets, frames_on, points_on, parts, shape.radii_array, FK_TABLES,
             PART_TABLES, *cloud, np.asarray(expected, dtype=np.float64).reshape(-1),
             np.array([1.0 / (2.0 * sigma * sigma), alpha, weight]),
@@ -296,18 +306,6 @@ def _distance(points, n, g):
 
 
 @numba.njit(cache=True)
-def part_distances(points: np.ndarray, geometry: np.ndarray) -> np.ndarray:
-    """|d| of eq. 7 of each point (N, 3) to each part of one pose, geometry (K, G): (N, K),
-    as :func:`~optrack.skeleton.likelihood.signed_distance` computes it (float64)."""
-    out = np.empty((points.shape[0], geometry.shape[0]))
-    for k in range(geometry.shape[0]):
-        g = geometry[k].astype(np.float64)
-        for n in range(points.shape[0]):
-            out[n, k] = _distance(points, n, g)[0]
-    return out
-
-
-@numba.njit(cache=True)
 def nearest_areas(points: np.ndarray, geometry: np.ndarray, alpha: float) -> np.ndarray:
     """Eq. 8 for one pose, geometry (K, G): each point's (N, 3) area of interest, 2 k +
     half (1 from the middle of the bone on), of the part k nearest it in |d| if that is
@@ -329,15 +327,52 @@ def nearest_areas(points: np.ndarray, geometry: np.ndarray, alpha: float) -> np.
 
 
 @numba.njit(cache=True)
-def segment_distances(points: np.ndarray, geometry: np.ndarray) -> np.ndarray:
-    """Distance (m) of each point (N, 3) to each part's axis segment (from s0 to s1 along
-    it), geometry (K, G) of one pose: (N, K)."""
-    out = np.empty((points.shape[0], geometry.shape[0]))
-    for k in range(geometry.shape[0]):
-        g = geometry[k].astype(np.float64)
-        for n in range(points.shape[0]):
-            v0, v1, v2 = points[n, 0] - g[0], points[n, 1] - g[1], points[n, 2] - g[2]
-            s = min(max(v0 * g[3] + v1 * g[4] + v2 * g[5], g[12]), g[13])
-            w0, w1, w2 = v0 - s * g[3], v1 - s * g[4], v2 - s * g[5]
-            out[n, k] = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-    return out
+def limb_points(points, geometry, fixed, own, alpha, gate, root, reach):
+    """What a limb is scored on, in one pass over the points (N, 3) and the parts of one
+    pose, geometry (K, G): each point's baseline, its |d| of eq. 7 to the nearest part
+    ``fixed`` (K,) marks (the rest of the body), capped at ``alpha``; and whether it is
+    near the limb: with ``gate`` > 0 (tracking), within ``gate`` of the axis of one of
+    the parts ``own`` or farther than ``alpha`` from every part; else within ``reach``
+    of the point ``root`` (3,). Returns (baseline (N,), near (N,) bool), as
+    :func:`limb_points_numpy` (the reference) gives them."""
+    n, k = points.shape[0], geometry.shape[0]
+    rows = geometry.astype(np.float64)
+    baseline = np.empty(n)
+    near = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        nearest, base = np.inf, np.inf
+        for j in range(k):
+            d = _distance(points, i, rows[j])[0]
+            nearest = min(nearest, d)
+            if fixed[j]:
+                base = min(base, d)
+        baseline[i] = min(base, alpha)
+        if gate > 0.0:
+            close = nearest >= alpha
+            for j in own:
+                g = rows[j]
+                v0, v1, v2 = points[i, 0] - g[0], points[i, 1] - g[1], points[i, 2] - g[2]
+                s = min(max(v0 * g[3] + v1 * g[4] + v2 * g[5], g[12]), g[13])
+                w0, w1, w2 = v0 - s * g[3], v1 - s * g[4], v2 - s * g[5]
+                close |= np.sqrt(w0 * w0 + w1 * w1 + w2 * w2) < gate
+            near[i] = close
+        else:
+            v0, v1, v2 = points[i, 0] - root[0], points[i, 1] - root[1], points[i, 2] - root[2]
+            near[i] = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2) < reach
+    return baseline, near
+
+
+def limb_points_numpy(points, geometry, fixed, own, alpha, gate, root, reach):
+    """:func:`limb_points` in plain numpy: the reference it is tested against."""
+    g = np.asarray(geometry, dtype=np.float64)
+    distance = np.abs(signed_distance(points, g[None])[0][0])  # (N, K)
+    baseline = np.minimum(distance[:, np.asarray(fixed, dtype=bool)].min(axis=1), alpha)
+    if gate > 0.0:
+        mine = g[np.asarray(own)]
+        v = points[:, None, :] - mine[None, :, 0:3]
+        s = np.clip(np.sum(v * mine[None, :, 3:6], axis=2), mine[:, 12], mine[:, 13])
+        segment = np.linalg.norm(v - s[..., None] * mine[None, :, 3:6], axis=2)
+        near = (segment.min(axis=1) < gate) | (distance.min(axis=1) >= alpha)
+    else:
+        near = np.linalg.norm(points - np.asarray(root), axis=1) < reach
+    return baseline, near

@@ -72,6 +72,9 @@ _JOINT_AREAS = _areas_of_joints()
 _FACING_TURN = 1.0
 # The parts whose support tells whether a limb is lost: its bones (the feet, cut by the
 # fusion's floor margin, hold few points even when found).
+# The share of the particles a limb's search again anneals (its 12 layers from uniform
+# angles cost as much as a frame's whole filter at every particle).
+_RESEARCH_SHARE = 0.5
 _LIMB_PARTS = {
     limb: np.array([k for k in PARTITION_PARTS[limb] if not PARTS[k].name.endswith("foot")])
     for limb in LIMBS
@@ -192,9 +195,13 @@ class SkeletonTracker:
         moved = False
         for limb in chosen:
             filt = self.filter
-            before = filt.estimate.copy()
+            before, particles = filt.estimate.copy(), filt.particles
             score = pose_log_likelihood(filt, points, before)
+            # The search keeps only its estimate (every particle takes it below): it
+            # anneals a share of the particles.
+            filt.particles = particles[: max(int(len(particles) * _RESEARCH_SHARE), 1)].copy()
             search_limb(filt, points, limb)
+            filt.particles = particles
             if pose_log_likelihood(filt, points, filt.estimate) > score:
                 moved = True
                 filt.particles[:, list(PARTITIONS[limb])] = filt.estimate[list(PARTITIONS[limb])]

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 from optrack.skeleton.filter import _take_and_diffuse, systematic_resample
-from optrack.skeleton.kernels import nearest_areas, part_distances, segment_distances
-from optrack.skeleton.likelihood import associate, signed_distance
+from optrack.skeleton.kernels import limb_points, limb_points_numpy, nearest_areas
+from optrack.skeleton.likelihood import associate
 from optrack.skeleton.model import (
     LIMITS,
+    PARTS,
     BodyShape,
     D,
     forward_kinematics,
@@ -50,21 +51,23 @@ def test_take_and_diffuse_equals_numpy(diffuse):
     assert not np.array_equal(particles[:, :12], expected[np.ix_(chosen, range(12))])
 
 
-def test_distances_of_one_pose_equal_numpy():
+@pytest.mark.parametrize(("partition", "gate"), [("left_arm", 0.35), ("right_leg", 0.0)])
+def test_limb_points_equal_numpy(partition, gate):
     rng = np.random.default_rng(4)
     shape = BodyShape.from_height(1.7)
     state = rest_state(shape, 0.3, -0.2, 1.0)
     state[3:] += rng.normal(0.0, 0.2, D - 3)
     points = np.concatenate([seen_cloud(state, shape, rng), rng.uniform(-2, 2, (50, 3))])
-    geometry = part_geometry(*forward_kinematics(state[None], shape), shape)
-    np.testing.assert_array_equal(
-        part_distances(points, geometry[0]), np.abs(signed_distance(points, geometry)[0][0])
-    )
-    g = geometry[0].astype(np.float64)
-    v = points[:, None, :] - g[None, :, 0:3]
-    s = np.clip(np.sum(v * g[None, :, 3:6], axis=2), g[:, 12], g[:, 13])
-    segment = np.linalg.norm(v - s[..., None] * g[None, :, 3:6], axis=2)
-    np.testing.assert_allclose(segment_distances(points, geometry[0]), segment, atol=1e-12)
+    pts, rot = forward_kinematics(state, shape)
+    geometry = part_geometry(pts[None], rot[None], shape)[0]
+    fixed = np.array([part.partition != partition for part in PARTS])
+    own = np.flatnonzero(~fixed)
+    args = (points, geometry, fixed, own, 0.6, gate, pts[4], 0.9)
+    baseline, near = limb_points(*args)
+    reference = limb_points_numpy(*args)
+    np.testing.assert_array_equal(baseline, reference[0])
+    np.testing.assert_array_equal(near, reference[1])
+    assert 0 < near.sum() < len(points) and 0 < np.sum(baseline < 0.6) < len(points)
 
 
 @pytest.mark.parametrize("alpha", [0.3, 0.6, 1.5])
