@@ -37,6 +37,7 @@ from optrack.skeleton.model import (
     part_reach,
 )
 from optrack.skeleton.params import SKELETON_PARAMS
+from optrack.skeleton.prior import ArmCollision
 
 __all__ = [
     "PARTITION_FRAMES",
@@ -293,8 +294,11 @@ class SkeletonFilter:
             sorted_points(scored, baseline), expected, consts, int(p.threads), base,
         )  # fmt: skip
         low, high = LIMITS[idx].T
+        collision = ArmCollision(self.estimate, partition, self.shape, p)
         for layer in range(layers):
             ll = scorer(self.particles)
+            if collision.active and (layer == 0 or not gate):  # tracking: the first layer
+                ll -= collision(self.particles)
             if layer == layers - 1:  # the estimate: the mean of the best few
                 best = _weights(ll, float(p.estimate_survival))
                 self.estimate[idx] = _weighted_mean(self.particles[:, idx], best, dims)

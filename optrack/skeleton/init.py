@@ -29,6 +29,7 @@ from optrack.skeleton.model import (
     part_geometry,
     rest_state,
 )
+from optrack.skeleton.prior import arm_collision_cost
 
 __all__ = [
     "LIMBS",
@@ -64,6 +65,19 @@ _FEET_BAND = (0.05, 0.2)
 _FEET_AHEAD = 0.02
 # The turns (radians) of the chest band's heading that the body's axis is searched from.
 _AXIS_TURNS = (0.0, -0.25 * np.pi, 0.25 * np.pi)
+# search_limb's share of particles drawn near the limb's rest pose, their spread (rad),
+# and that pose: a limb hanging with its elbow or knee a little bent.
+_REST_SHARE = 0.25
+_REST_SPREAD = 0.3
+_REST = {
+    "left_arm": np.array([0.0, 0.1, 0.0, 0.3]),
+    "right_arm": np.array([0.0, 0.1, 0.0, 0.3]),
+    "left_leg": np.array([0.0, 0.05, 0.0, 0.1]),
+    "right_leg": np.array([0.0, 0.05, 0.0, 0.1]),
+}
+# Coarse searches of each limb at initialisation (one alone sometimes settles on a wrong
+# fold of the arm, and the heading it completes then loses to the wrong one).
+_LIMB_TRIES = 2
 # Points higher than this share of the height are the chest and shoulders.
 _CHEST_BAND = (0.62, 0.8)
 
@@ -126,11 +140,10 @@ def pose_log_likelihood(filt: SkeletonFilter, points: np.ndarray, state: np.ndar
     pts, rot = forward_kinematics(np.asarray(state)[None], filt.shape)
     geometry = part_geometry(pts, rot, filt.shape)
     expected = filt.expected_support(len(points))
-    return float(
-        log_likelihood(
-            points, geometry, expected, float(p.sigma), float(p.alpha), float(p.support_weight)
-        )[0]
-    )
+    score = log_likelihood(
+        points, geometry, expected, float(p.sigma), float(p.alpha), float(p.support_weight)
+    )[0]
+    return float(score) - arm_collision_cost(state, filt.shape, p)
 
 
 def _torso_facing(filt: SkeletonFilter, points: np.ndarray, heading: float) -> np.ndarray:
@@ -152,6 +165,14 @@ def initialise_facing(filt: SkeletonFilter, points: np.ndarray, heading: float) 
     filt.reset(_torso_facing(filt, points, heading))
     for name in LIMBS:
         search_limb(filt, points, name)
+        for _ in range(_LIMB_TRIES - 1):  # again: the better of the searches is kept
+            dims = list(PARTITIONS[name])
+            before = filt.estimate.copy()
+            score = pose_log_likelihood(filt, points, before)
+            search_limb(filt, points, name)
+            if pose_log_likelihood(filt, points, filt.estimate) < score:
+                filt.estimate = before
+            filt.particles[:, dims] = filt.estimate[dims]
     # The finer rounds: every partition again, from this estimate, as slow frames would.
     fine = motion_spread(p, _FINE_DT)
     for _ in range(_FINE_ROUNDS):
@@ -166,7 +187,13 @@ def search_limb(filt: SkeletonFilter, points: np.ndarray, limb: str) -> None:
     ``init_layers`` layers against the rest of the estimate."""
     dims = list(PARTITIONS[limb])
     low, high = LIMITS[dims, 0], LIMITS[dims, 1]
-    filt.particles[:, dims] = filt.rng.uniform(low, high, size=(len(filt.particles), len(dims)))
+    n = len(filt.particles)
+    filt.particles[:, dims] = filt.rng.uniform(low, high, size=(n, len(dims)))
+    # A share near the limb at rest (an arm hanging, a leg straight): the likeliest pose,
+    # which a few points at the body's side (an arm the trunk half hides) support.
+    rest = int(n * _REST_SHARE)
+    near = filt.rng.normal(size=(rest, len(dims))) * _REST_SPREAD + _REST[limb]
+    filt.particles[:rest, dims] = np.clip(near, low, high)
     spread = np.zeros(D)
     spread[dims] = _LIMB_SPREAD
     filt.anneal(points, limb, int(filt.params.init_layers), spread)

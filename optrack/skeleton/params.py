@@ -138,6 +138,25 @@ SKELETON_PARAMS = register(
                 help="A limb skips points the parts already fixed explain this well (in part "
                 "radii): it could not explain them better.",
             ),
+            Param(
+                "collision_weight",
+                2.0,
+                min=0.0,
+                max=100.0,
+                step=0.5,
+                help="Cost (against the log-likelihood) of an arm's elbow, forearm or wrist "
+                "inside the trunk or the head, per part radius beyond collision_margin "
+                "(0: none).",
+            ),
+            Param(
+                "collision_margin",
+                0.3,
+                min=0.0,
+                max=1.0,
+                step=0.05,
+                help="How far inside the trunk or the head (in its radii) an arm may reach "
+                "before it costs anything.",
+            ),
             # ---- motion model: Gaussian random walk per frame, agility per joint group
             Param(
                 "agility_root_m",

@@ -119,6 +119,8 @@ class ShapeSearch:
             raise ValueError("estimate_shape needs one tracked pose per cloud, and at least one.")
         self.params = SKELETON_PARAMS.create(params.as_dict() if params is not None else None)
         self.params.particles = _REFIT_PARTICLES
+        # No arms' collision prior: its cost grows with the trunk's radii, searched here.
+        self.params.collision_weight = 0.0
         for name, value in _REFIT_AGILITY.items():
             setattr(self.params, name, value)
         self.clouds = [np.asarray(c, dtype=np.float64) for c in clouds]

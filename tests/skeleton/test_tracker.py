@@ -124,34 +124,34 @@ def test_shape_estimate_moves_towards_the_persons_own_body():
     assert estimate.lower_trunk / SHAPE.lower_trunk == pytest.approx(1.0, abs=0.05)
 
 
-# Each seed must pass (one seed alone passed by luck). Over random standing poses the
-# search finds the arms within 4 % about two times in three (clouds of seeds 0-13, the
-# tracker's seeds 0 and 1: 16 of 24, 8 of 24 with the search before 2026-11-26); these
-# seeds gave it with every tracker and filter version tried. The misses: a straight arm,
-# whose length the likelihood hardly bounds from above (1.20), an arm tracked on the
-# average body pulling the length short (1.06), or an arm tracked wrong from the first
-# frame (seed 8 with the filter of 2026-11-26: the left wrist 0.27 m off, arms 0.78).
-@pytest.mark.parametrize("seed", [1, 3, 9])
-def test_tracker_estimates_the_persons_body_from_its_first_frames(seed):
-    rng = np.random.default_rng(seed)
+# Seeds 0-9, not chosen for passing. Every seed must track the body and estimate its
+# limbs' radii; the arms' length, which the likelihood barely bounds (a straight arm
+# too long pays little; one tracked on the average body pulls it short), is found within
+# 4 % in 7 of these 10 (2026-11-26: the misses 1.05, 1.06 and 1.02 times SHAPE's for a
+# true 1.12): the test asks for 6, and says which seeds missed.
+def test_tracker_estimates_the_persons_body_from_its_first_frames():
     own = SHAPE.scaled(arms=1.12, limb_radius=1.25)
-    truth = standing(rng, 0.8)
     # The whole estimate in the update that keeps the last frame (the default spreads it).
     params = SKELETON_PARAMS.create({"shape_seconds": 0.1, "shape_frames": 3, "shape_steps": 1000})
-    tracker = SkeletonTracker(params, seed=0)
-    estimated = []
-    for t in range(7):
-        estimate = tracker.update(seen_cloud(truth, own, rng), t / 30)
-        estimated.append(tracker.shape_estimated)
-    assert estimated == [False] * 4 + [True] * 3  # from frames 0, 2 and 4 (0.1 s)
-    assert estimate.state == "tracking"
-    average = BodyShape.from_height(tracker.shape.height)
-    arms = tracker.shape.upper_arm  # the person's own: 1.12 times SHAPE's
-    assert arms == pytest.approx(1.12 * SHAPE.upper_arm, rel=0.04)
-    assert arms / average.upper_arm > 1.08  # longer than the height alone says
-    assert tracker.shape.radii[3][0] / average.radii[3][0] > 1.1
-    joints = forward_kinematics(truth, own)[0][: len(JOINTS)]
-    assert np.linalg.norm(estimate.joints - joints, axis=1).mean() < 0.05
+    arms = {}
+    for seed in range(10):
+        rng = np.random.default_rng(seed)
+        truth = standing(rng, 0.8)
+        tracker = SkeletonTracker(params, seed=0)
+        estimated = []
+        for t in range(7):
+            estimate = tracker.update(seen_cloud(truth, own, rng), t / 30)
+            estimated.append(tracker.shape_estimated)
+        assert estimated == [False] * 4 + [True] * 3  # from frames 0, 2 and 4 (0.1 s)
+        assert estimate.state == "tracking"
+        average = BodyShape.from_height(tracker.shape.height)
+        assert tracker.shape.radii[3][0] / average.radii[3][0] > 1.1, seed
+        joints = forward_kinematics(truth, own)[0][: len(JOINTS)]
+        assert np.linalg.norm(estimate.joints - joints, axis=1).mean() < 0.05, seed
+        arms[seed] = tracker.shape.upper_arm / SHAPE.upper_arm  # the person's own: 1.12
+    found = [seed for seed, ratio in arms.items() if abs(ratio - 1.12) <= 0.04 * 1.12]
+    assert len(found) >= 6, {seed: round(ratio, 3) for seed, ratio in arms.items()}
+    assert np.median(list(arms.values())) > 1.08  # longer than the height alone says
 
 
 def test_a_given_body_is_kept_and_no_estimate_runs_when_switched_off():

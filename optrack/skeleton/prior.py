@@ -1,0 +1,122 @@
+"""What the likelihood cannot rule out: an arm through the trunk or the head.
+
+The likelihood (eq. 9) scores how well the parts explain the points; it does
+not know that a body cannot pass through itself. With two sensors an arm
+hanging at the side is seen by few points, most of which the trunk explains
+almost as well, while an arm folded up into the head or the chest gets the
+head's or the chest's points and fills its areas of interest: the filter and
+the limb searches then keep the arm inside the body (the walk clip, 2 sensors:
+an elbow 0.6 m above the true one, at full confidence).
+
+:class:`ArmCollision` is a prior on the arms' angles: each of the elbow, the
+forearm's middle and the wrist whose scaled distance (eq. 7) to the trunk's or
+the head's cylinder is under ``-collision_margin`` (that far inside, in the
+part's radii) costs ``collision_weight`` times how much further inside it is.
+A hand on the belly or arms crossed over the chest stay outside the
+cylinders and cost nothing.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from optrack.params import Params
+from optrack.skeleton.model import (
+    FK_TABLES,
+    FRAMES,
+    PART_INDEX,
+    PARTITIONS,
+    POINTS,
+    BodyShape,
+    D,
+    fk_pose,
+    forward_kinematics,
+    part_geometry,
+)
+
+__all__ = ["ArmCollision", "arm_collision_cost"]
+
+# The parts an arm must stay out of, and the points of each arm that are tested.
+_BODY = np.array([PART_INDEX["lower_trunk"], PART_INDEX["upper_trunk"], PART_INDEX["head"]])
+_ARMS = {
+    "left_arm": (("left_shoulder", "left_elbow"), "left_elbow", "left_wrist"),
+    "right_arm": (("right_shoulder", "right_elbow"), "right_elbow", "right_wrist"),
+}
+
+
+@numba.njit(cache=True, fastmath=True)
+def _inside(point, g, margin):
+    """How far ``point`` (3,) lies inside the part of geometry row ``g`` beyond
+    ``margin``, in its radii: max(0, -d - margin), d of eq. 7 signed."""
+    v0, v1, v2 = point[0] - g[0], point[1] - g[1], point[2] - g[2]
+    along = v0 * g[3] + v1 * g[4] + v2 * g[5]
+    forward = v0 * g[6] + v1 * g[7] + v2 * g[8]
+    side = v0 * g[9] + v1 * g[10] + v2 * g[11]
+    beyond = max(g[12] - along, along - g[13], 0.0)
+    radius = g[14] + g[15] * min(max(along * g[16], 0.0), 1.0)
+    signed = np.sqrt(forward * forward + side * side + beyond * beyond) / radius - 1.0
+    return max(-signed - margin, 0.0)
+
+
+@numba.njit(cache=True, fastmath=True)
+def _depths(particles, dims, base_rot, base_pts, offsets, chosen, ends, body, margin, tables):
+    """For each particle (P, D), the arm's summed depth inside the ``body`` rows (K, G):
+    its elbow, its forearm's middle and its wrist (``ends``: the elbow's and the
+    wrist's point indices), the arm's angles ``dims`` from the particle, the rest of
+    the pose as in ``base_rot``/``base_pts``."""
+    fparent, fdof, faxis, fsign, pparent, pframe = tables
+    rot, pts = base_rot.copy(), base_pts.copy()
+    cos_x, sin_x = np.zeros(D), np.zeros(D)
+    middle = np.empty(3)
+    out = np.zeros(particles.shape[0])
+    for p in range(particles.shape[0]):
+        x = particles[p]
+        for d in dims:
+            cos_x[d], sin_x[d] = np.cos(x[d]), np.sin(x[d])
+        fk_pose(x, cos_x, sin_x, offsets, chosen, rot, pts, fparent, fdof, faxis, fsign,
+                pparent, pframe)  # fmt: skip
+        for r in range(3):
+            middle[r] = 0.5 * (pts[ends[0], r] + pts[ends[1], r])
+        total = 0.0
+        for point in (pts[ends[0]], middle, pts[ends[1]]):
+            deepest = 0.0
+            for k in range(body.shape[0]):
+                deepest = max(deepest, _inside(point, body[k], margin))
+            total += deepest
+        out[p] = total
+    return out
+
+
+class ArmCollision:
+    """The collision prior of one arm's particles against a fixed trunk and head (see
+    the module docstring): ``prior(particles)`` (P, D) gives each one's cost (P,), to
+    subtract from its log-likelihood; no cost for the torso and the legs
+    (``active`` is False)."""
+
+    def __init__(self, estimate: np.ndarray, partition: str, shape: BodyShape, params: Params):
+        self.weight = float(params.collision_weight)
+        self.active = partition in _ARMS and self.weight > 0.0
+        if not self.active:
+            return
+        frames, elbow, wrist = _ARMS[partition]
+        pts, rot = forward_kinematics(np.asarray(estimate, dtype=np.float64), shape)
+        body = part_geometry(pts[None], rot[None], shape, _BODY)[0].astype(np.float64)
+        self._args = (
+            np.array(PARTITIONS[partition], dtype=np.int64), rot, pts, shape._offsets,
+            np.array([name in frames for name in FRAMES]),
+            np.array([POINTS.index(elbow), POINTS.index(wrist)], dtype=np.int64), body,
+            float(params.collision_margin), FK_TABLES,
+        )  # fmt: skip
+
+    def __call__(self, particles: np.ndarray) -> np.ndarray:
+        if not self.active:
+            return np.zeros(len(particles))
+        particles = np.ascontiguousarray(particles, dtype=np.float64)
+        return self.weight * _depths(particles, *self._args)
+
+
+def arm_collision_cost(state: np.ndarray, shape: BodyShape, params: Params) -> float:
+    """Both arms' collision cost of one pose (D,)."""
+    state = np.asarray(state, dtype=np.float64)
+    return float(sum(ArmCollision(state, arm, shape, params)(state[None])[0] for arm in _ARMS))
