@@ -327,8 +327,9 @@ SKELETON_PARAMS = register(
                 min=1,
                 max=1000,
                 step=1,
-                help="Steps of the body's estimate per update (each refits one kept frame's pose "
-                "to one candidate body, about a hundredth of the estimate), so that no frame stalls.",
+                help="Steps of the body's estimate per update (each refits two partitions of one "
+                "kept frame's pose to one candidate body, about a 300th of the estimate), so that "
+                "no frame stalls.",
             ),
             Param(
                 "lost_frames",

@@ -23,7 +23,7 @@ change the score far more than lengths do, hence searched first.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Generator, Iterator, Sequence
 
 import numpy as np
 
@@ -48,6 +48,9 @@ _REFIT_AGILITY = {"agility_arms_rad": 8.0, "agility_legs_rad": 6.0}
 _REFIT_PARTICLES = 200
 _REFIT_LAYERS = 3
 _REFIT_DT = 1.0 / 30.0
+# Partitions a step of the search anneals (of one frame's refit): a step costs about
+# 1.5 ms of CPU, so that the frames it runs in stay near the others' cost.
+_PER_STEP = 2
 # Each forearm's far end (its part runs past the wrist over the hand) and the weight of
 # the term that charges it for the distance, past its radius, to the nearest point.
 _FOREARMS = tuple(
@@ -78,11 +81,14 @@ def _refit(
     pose: np.ndarray,
     spread: np.ndarray,
     partitions: Sequence[str],
-) -> tuple[float, np.ndarray]:
+) -> Generator[None, None, tuple[float, np.ndarray]]:
     """One frame's pose refit to the filter's shape by a short anneal of ``partitions``,
-    and its score (the refit may only help: the given pose is kept when it scores higher)."""
+    a yield after every ``_PER_STEP`` of them but the last; returns its score and pose
+    (the refit may only help: the given pose is kept when it scores higher)."""
     filt.reset(pose, spread)
-    for name in partitions:
+    for i, name in enumerate(partitions):
+        if i and i % _PER_STEP == 0:
+            yield
         filt.anneal(points, name, _REFIT_LAYERS, spread)
     best = filt.estimate.copy()
     score = search_score(filt, points, best)
@@ -103,8 +109,9 @@ def _on_the_floor(pose: np.ndarray, old: BodyShape, new: BodyShape) -> np.ndarra
 
 class ShapeSearch:
     """:func:`estimate_shape` in small steps, so that it can run across frames: each
-    :meth:`advance` refits one frame's pose to one candidate body (a short anneal of 200
-    particles); :attr:`done` once every candidate is scored, then :attr:`shape` is the
+    :meth:`advance` refits two partitions of one frame's pose to one candidate body (a
+    short anneal of 200 particles; a refit of the four limbs takes two steps, of the whole
+    pose three); :attr:`done` once every candidate is scored, then :attr:`shape` is the
     best body and :attr:`poses` each frame's pose refit to it."""
 
     def __init__(
@@ -133,20 +140,20 @@ class ShapeSearch:
         self._work = self._search()
 
     def advance(self) -> bool:
-        """Do one frame's refit; returns :attr:`done`."""
+        """Do one step of a frame's refit; returns :attr:`done`."""
         if not self.done:
             self.done = next(self._work, True) is True
         return self.done
 
     def _score(self, shape: BodyShape, partitions: Sequence[str]) -> Iterator[None]:
-        """Score ``shape`` from the current poses frame by frame (a yield after each), the
-        same random numbers for every shape; leaves the total and the refit poses in
-        ``self._last``."""
+        """Score ``shape`` from the current poses frame by frame (yields within and after
+        each refit), the same random numbers for every shape; leaves the total and the
+        refit poses in ``self._last``."""
         filt = SkeletonFilter(shape, self.params, self._seed)
         total, refit = 0.0, []
         for points, pose in zip(self.clouds, self.poses, strict=True):
             start = _on_the_floor(pose, self.shape, shape)
-            score, best = _refit(filt, points, start, self._spread, partitions)
+            score, best = yield from _refit(filt, points, start, self._spread, partitions)
             total += score
             refit.append(best)
             yield
