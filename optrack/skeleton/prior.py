@@ -60,11 +60,13 @@ def _inside(point, g, margin):
 
 
 @numba.njit(cache=True, fastmath=True)
-def _depths(particles, dims, base_rot, base_pts, offsets, chosen, ends, body, margin, tables):
+def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, chosen, ends, body, margin,
+            tables):  # fmt: skip
     """For each particle (P, D), the arm's summed depth inside the ``body`` rows (K, G):
     its elbow, its forearm's middle and its wrist (``ends``: the elbow's and the
-    wrist's point indices), the arm's angles ``dims`` from the particle, the rest of
-    the pose as in ``base_rot``/``base_pts``."""
+    wrist's point indices), the arm's angles ``dims`` from the particle (their cosines
+    and sines ``cos``, ``sin``, (P, len(dims))), the rest of the pose as in
+    ``base_rot``/``base_pts``."""
     fparent, fdof, faxis, fsign, pparent, pframe = tables
     rot, pts = base_rot.copy(), base_pts.copy()
     cos_x, sin_x = np.zeros(D), np.zeros(D)
@@ -72,8 +74,8 @@ def _depths(particles, dims, base_rot, base_pts, offsets, chosen, ends, body, ma
     out = np.zeros(particles.shape[0])
     for p in range(particles.shape[0]):
         x = particles[p]
-        for d in dims:
-            cos_x[d], sin_x[d] = np.cos(x[d]), np.sin(x[d])
+        for j in range(dims.shape[0]):
+            cos_x[dims[j]], sin_x[dims[j]] = cos[p, j], sin[p, j]
         fk_pose(x, cos_x, sin_x, offsets, chosen, rot, pts, fparent, fdof, faxis, fsign,
                 pparent, pframe)  # fmt: skip
         for r in range(3):
@@ -113,7 +115,9 @@ class ArmCollision:
         if not self.active:
             return np.zeros(len(particles))
         particles = np.ascontiguousarray(particles, dtype=np.float64)
-        return self.weight * _depths(particles, *self._args)
+        # Sines and cosines by numpy's float32 vector path, as the kinematics' own.
+        turned = particles[:, self._args[0]].astype(np.float32)
+        return self.weight * _depths(particles, np.cos(turned), np.sin(turned), *self._args)
 
 
 def arm_collision_cost(state: np.ndarray, shape: BodyShape, params: Params) -> float:
