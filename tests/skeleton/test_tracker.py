@@ -127,8 +127,9 @@ def test_shape_estimate_moves_towards_the_persons_own_body():
 # Seeds 0-9, not chosen for passing. Every seed must track the body and estimate its
 # limbs' radii; the arms' length, which the likelihood barely bounds (a straight arm
 # too long pays little; one tracked on the average body pulls it short), is found within
-# 4 % in 7 of these 10 (2026-11-26: the misses 1.05, 1.06 and 1.02 times SHAPE's for a
-# true 1.12): the test asks for 6, and says which seeds missed.
+# 4 % in all 10 (2026-11-26, initialisation searching each limb twice: 1.08-1.15 times
+# SHAPE's for a true 1.12; 7 of 10 with one search, the misses 1.02-1.06): the test asks
+# for 8, and says what each seed found.
 def test_tracker_estimates_the_persons_body_from_its_first_frames():
     own = SHAPE.scaled(arms=1.12, limb_radius=1.25)
     # The whole estimate in the update that keeps the last frame (the default spreads it).
@@ -150,7 +151,7 @@ def test_tracker_estimates_the_persons_body_from_its_first_frames():
         assert np.linalg.norm(estimate.joints - joints, axis=1).mean() < 0.05, seed
         arms[seed] = tracker.shape.upper_arm / SHAPE.upper_arm  # the person's own: 1.12
     found = [seed for seed, ratio in arms.items() if abs(ratio - 1.12) <= 0.04 * 1.12]
-    assert len(found) >= 6, {seed: round(ratio, 3) for seed, ratio in arms.items()}
+    assert len(found) >= 8, {seed: round(ratio, 3) for seed, ratio in arms.items()}
     assert np.median(list(arms.values())) > 1.08  # longer than the height alone says
 
 
