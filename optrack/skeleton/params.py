@@ -243,7 +243,7 @@ SKELETON_PARAMS = register(
             ),
             Param(
                 "facing_speed",
-                0.0,
+                0.5,
                 min=0.0,
                 max=5.0,
                 step=0.1,

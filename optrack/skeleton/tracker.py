@@ -70,11 +70,11 @@ _JOINT_AREAS = _areas_of_joints()
 # Turning faster than this (rad/s), a person's path swings ahead of their heading (a
 # runner's U-turn put it 130 degrees away): the facing is not checked.
 _FACING_TURN = 1.0
-# The parts whose support tells whether a limb is lost: its bones (the feet, cut by the
-# fusion's floor margin, hold few points even when found).
 # The share of the particles a limb's search again anneals (its 12 layers from uniform
 # angles cost as much as a frame's whole filter at every particle).
 _RESEARCH_SHARE = 0.5
+# The parts whose support tells whether a limb is lost: its bones (the feet, cut by the
+# fusion's floor margin, hold few points even when found).
 _LIMB_PARTS = {
     limb: np.array([k for k in PARTITION_PARTS[limb] if not PARTS[k].name.endswith("foot")])
     for limb in LIMBS
