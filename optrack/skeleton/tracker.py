@@ -71,8 +71,12 @@ _JOINT_AREAS = _areas_of_joints()
 # runner's U-turn put it 130 degrees away): the facing is not checked.
 _FACING_TURN = 1.0
 # The share of the particles a limb's search again anneals (its 12 layers from uniform
-# angles cost as much as a frame's whole filter at every particle).
+# angles cost as much as a frame's whole filter at every particle), and the fewest it
+# anneals (all of them when the filter has fewer): a search from uniform angles over a
+# limb's four angles needs about that many (with 150 of 300, the skeleton node's test lost the
+# body's height in 2 of 6 runs).
 _RESEARCH_SHARE = 0.5
+_RESEARCH_MIN = 1000
 # The parts whose support tells whether a limb is lost: its bones (the feet, cut by the
 # fusion's floor margin, hold few points even when found).
 _LIMB_PARTS = {
@@ -199,7 +203,8 @@ class SkeletonTracker:
             score = pose_log_likelihood(filt, points, before)
             # The search keeps only its estimate (every particle takes it below): it
             # anneals a share of the particles.
-            filt.particles = particles[: max(int(len(particles) * _RESEARCH_SHARE), 1)].copy()
+            share = max(int(len(particles) * _RESEARCH_SHARE), _RESEARCH_MIN)
+            filt.particles = particles[:share].copy()
             search_limb(filt, points, limb)
             filt.particles = particles
             if pose_log_likelihood(filt, points, filt.estimate) > score:
