@@ -14,3 +14,12 @@ def opencv_data(shared_data: Path) -> Path:
     if not folder.is_dir():
         pytest.skip(f"OpenCV's chessboard images not found at {folder}")
     return folder
+
+
+@pytest.fixture(scope="module")
+def network():
+    """A synthetic network of six cameras: (true world_T_camera, intrinsics)."""
+    from optrack.calibration.synthetic import synthetic_session
+
+    session = synthetic_session(6, 10, floor_views=0, seed=3)
+    return session.world_T_camera, session.intrinsics

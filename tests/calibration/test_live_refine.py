@@ -5,7 +5,6 @@ applied all together or not at all."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from optrack.calibration.live_refine import board_rms_px, refine_walk, walk_trajectories
 from optrack.calibration.network import NetworkCalibrator
@@ -19,12 +18,6 @@ from optrack.types import (
     SensorCalibration,
     as_matrix4,
 )
-
-
-@pytest.fixture(scope="module")
-def network():
-    session = synthetic_session(6, 10, floor_views=0, seed=3)
-    return session.world_T_camera, session.intrinsics
 
 
 def _moved(pose: np.ndarray, dx: float) -> np.ndarray:

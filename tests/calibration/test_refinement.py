@@ -11,14 +11,8 @@ from optrack.calibration.refinement import (
     alignment_error,
     refine_from_trajectories,
 )
-from optrack.calibration.synthetic import perturb_poses, synthetic_session, synthetic_walk
+from optrack.calibration.synthetic import perturb_poses, synthetic_walk
 from optrack.geometry import transform_points
-
-
-@pytest.fixture(scope="module")
-def network():
-    session = synthetic_session(6, 10, floor_views=0, seed=3)
-    return session.world_T_camera, session.intrinsics
 
 
 def _trajectories(network, perturbed, seed, **walk):
