@@ -39,6 +39,7 @@ __all__ = [
     "limb_points",
     "limb_points_numpy",
     "nearest_areas",
+    "point_distance",
 ]
 
 LANES = 32  # poses whose kinematics and geometry are computed together (vector lanes)
@@ -292,9 +293,9 @@ class PartitionScorer:
 
 
 @numba.njit(cache=True, inline="always")
-def _distance(points, n, g):
-    """|d| of eq. 7 of point n to the part of row g (float64), and its coordinate along
-    the bone in bone lengths."""
+def point_distance(points, n, g):
+    """d of eq. 7 of point n to the part of row g (float64), signed (negative inside the
+    part), and its coordinate along the bone in bone lengths."""
     v0, v1, v2 = points[n, 0] - g[0], points[n, 1] - g[1], points[n, 2] - g[2]
     s = v0 * g[3] + v1 * g[4] + v2 * g[5]
     e = v0 * g[6] + v1 * g[7] + v2 * g[8]
@@ -302,7 +303,14 @@ def _distance(points, n, g):
     over = max(max(g[12] - s, s - g[13]), 0.0)
     t = s * g[16]
     r = g[14] + g[15] * min(max(t, 0.0), 1.0)
-    return abs(np.sqrt(e * e + f * f + over * over) / r - 1.0), t
+    return np.sqrt(e * e + f * f + over * over) / r - 1.0, t
+
+
+@numba.njit(cache=True, inline="always")
+def _distance(points, n, g):
+    """|d| of eq. 7 of point n to the part of row g, and its coordinate along the bone."""
+    d, t = point_distance(points, n, g)
+    return abs(d), t
 
 
 @numba.njit(cache=True)

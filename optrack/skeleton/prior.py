@@ -22,6 +22,7 @@ import numba
 import numpy as np
 
 from optrack.params import Params
+from optrack.skeleton.kernels import point_distance
 from optrack.skeleton.model import (
     FK_TABLES,
     FRAMES,
@@ -46,20 +47,6 @@ _ARMS = {
 
 
 @numba.njit(cache=True, fastmath=True)
-def _inside(point, g, margin):
-    """How far ``point`` (3,) lies inside the part of geometry row ``g`` beyond
-    ``margin``, in its radii: max(0, -d - margin), d of eq. 7 signed."""
-    v0, v1, v2 = point[0] - g[0], point[1] - g[1], point[2] - g[2]
-    along = v0 * g[3] + v1 * g[4] + v2 * g[5]
-    forward = v0 * g[6] + v1 * g[7] + v2 * g[8]
-    side = v0 * g[9] + v1 * g[10] + v2 * g[11]
-    beyond = max(g[12] - along, along - g[13], 0.0)
-    radius = g[14] + g[15] * min(max(along * g[16], 0.0), 1.0)
-    signed = np.sqrt(forward * forward + side * side + beyond * beyond) / radius - 1.0
-    return max(-signed - margin, 0.0)
-
-
-@numba.njit(cache=True, fastmath=True)
 def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, chosen, ends, body, margin,
             tables):  # fmt: skip
     """For each particle (P, D), the arm's summed depth inside the ``body`` rows (K, G):
@@ -70,7 +57,7 @@ def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, chosen, ends
     fparent, fdof, faxis, fsign, pparent, pframe = tables
     rot, pts = base_rot.copy(), base_pts.copy()
     cos_x, sin_x = np.zeros(D), np.zeros(D)
-    middle = np.empty(3)
+    tested = np.empty((3, 3))  # the elbow, the forearm's middle, the wrist
     out = np.zeros(particles.shape[0])
     for p in range(particles.shape[0]):
         x = particles[p]
@@ -79,12 +66,13 @@ def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, chosen, ends
         fk_pose(x, cos_x, sin_x, offsets, chosen, rot, pts, fparent, fdof, faxis, fsign,
                 pparent, pframe)  # fmt: skip
         for r in range(3):
-            middle[r] = 0.5 * (pts[ends[0], r] + pts[ends[1], r])
+            tested[0, r], tested[2, r] = pts[ends[0], r], pts[ends[1], r]
+            tested[1, r] = 0.5 * (tested[0, r] + tested[2, r])
         total = 0.0
-        for point in (pts[ends[0]], middle, pts[ends[1]]):
-            deepest = 0.0
+        for q in range(3):
+            deepest = 0.0  # how far inside a part beyond the margin, in its radii
             for k in range(body.shape[0]):
-                deepest = max(deepest, _inside(point, body[k], margin))
+                deepest = max(deepest, -point_distance(tested, q, body[k])[0] - margin)
             total += deepest
         out[p] = total
     return out
