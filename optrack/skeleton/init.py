@@ -40,6 +40,7 @@ __all__ = [
     "initialise_facing",
     "pose_log_likelihood",
     "search_limb",
+    "search_limb_again",
 ]
 
 LIMBS = ("left_arm", "right_arm", "left_leg", "right_leg")
@@ -166,13 +167,7 @@ def initialise_facing(filt: SkeletonFilter, points: np.ndarray, heading: float) 
     for name in LIMBS:
         search_limb(filt, points, name)
         for _ in range(_LIMB_TRIES - 1):  # again: the better of the searches is kept
-            dims = list(PARTITIONS[name])
-            before = filt.estimate.copy()
-            score = pose_log_likelihood(filt, points, before)
-            search_limb(filt, points, name)
-            if pose_log_likelihood(filt, points, filt.estimate) < score:
-                filt.estimate = before
-            filt.particles[:, dims] = filt.estimate[dims]
+            search_limb_again(filt, points, name)
     # The finer rounds: every partition again, from this estimate, as slow frames would.
     fine = motion_spread(p, _FINE_DT)
     for _ in range(_FINE_ROUNDS):
@@ -180,6 +175,26 @@ def initialise_facing(filt: SkeletonFilter, points: np.ndarray, heading: float) 
         for name in PARTITIONS:
             filt.anneal(points, name, layers, fine)
     return filt.estimate.copy()
+
+
+def search_limb_again(
+    filt: SkeletonFilter, points: np.ndarray, limb: str, particles: int | None = None
+) -> bool:
+    """:func:`search_limb` from the current estimate, its pose kept only where the whole
+    body's likelihood rose; the limb's particles then all take the estimate. The search
+    anneals the first ``particles`` of them (None: all). Returns whether the limb moved."""
+    dims = list(PARTITIONS[limb])
+    before, kept = filt.estimate.copy(), filt.particles
+    score = pose_log_likelihood(filt, points, before)
+    if particles is not None:
+        filt.particles = kept[:particles].copy()
+    search_limb(filt, points, limb)
+    filt.particles = kept
+    moved = pose_log_likelihood(filt, points, filt.estimate) > score
+    if not moved:
+        filt.estimate = before
+    filt.particles[:, dims] = filt.estimate[dims]
+    return moved
 
 
 def search_limb(filt: SkeletonFilter, points: np.ndarray, limb: str) -> None:

@@ -44,10 +44,10 @@ from optrack.skeleton.init import (
     initialise,
     initialise_facing,
     pose_log_likelihood,
-    search_limb,
+    search_limb_again,
 )
 from optrack.skeleton.joints import JOINTS
-from optrack.skeleton.model import PARTITIONS, PARTS, BodyShape, forward_kinematics
+from optrack.skeleton.model import PARTS, BodyShape, forward_kinematics
 from optrack.skeleton.params import SKELETON_PARAMS
 from optrack.skeleton.shape import ShapeSearch
 
@@ -197,22 +197,11 @@ class SkeletonTracker:
                 if limb not in chosen and support[_LIMB_PARTS[limb]].mean(axis=1).min() < threshold
             ]
         moved = False
+        # The search keeps only its estimate (every particle takes it): it anneals a share
+        # of the particles.
+        share = max(int(len(self.filter.particles) * _RESEARCH_SHARE), _RESEARCH_MIN)
         for limb in chosen:
-            filt = self.filter
-            before, particles = filt.estimate.copy(), filt.particles
-            score = pose_log_likelihood(filt, points, before)
-            # The search keeps only its estimate (every particle takes it below): it
-            # anneals a share of the particles.
-            share = max(int(len(particles) * _RESEARCH_SHARE), _RESEARCH_MIN)
-            filt.particles = particles[:share].copy()
-            search_limb(filt, points, limb)
-            filt.particles = particles
-            if pose_log_likelihood(filt, points, filt.estimate) > score:
-                moved = True
-                filt.particles[:, list(PARTITIONS[limb])] = filt.estimate[list(PARTITIONS[limb])]
-            else:
-                filt.estimate = before
-                filt.particles[:, list(PARTITIONS[limb])] = before[list(PARTITIONS[limb])]
+            moved |= search_limb_again(self.filter, points, limb, share)
         return moved
 
     def _sample_shape(self, points: np.ndarray, stamp: float) -> None:
