@@ -135,8 +135,11 @@ def body_axis(filt: SkeletonFilter, points: np.ndarray) -> float:
     return best
 
 
-def pose_log_likelihood(filt: SkeletonFilter, points: np.ndarray, state: np.ndarray) -> float:
-    """The full-body likelihood (eq. 9, every part) of one pose."""
+def pose_log_likelihood(
+    filt: SkeletonFilter, points: np.ndarray, state: np.ndarray, prior: bool = True
+) -> float:
+    """The full-body likelihood (eq. 9, every part) of one pose, less the arms' collision
+    prior unless ``prior`` is False."""
     p = filt.params
     pts, rot = forward_kinematics(np.asarray(state)[None], filt.shape)
     geometry = part_geometry(pts, rot, filt.shape)
@@ -144,7 +147,7 @@ def pose_log_likelihood(filt: SkeletonFilter, points: np.ndarray, state: np.ndar
     score = log_likelihood(
         points, geometry, expected, float(p.sigma), float(p.alpha), float(p.support_weight)
     )[0]
-    return float(score) - arm_collision_cost(state, filt.shape, p)
+    return float(score) - (arm_collision_cost(state, filt.shape, p) if prior else 0.0)
 
 
 def _torso_facing(filt: SkeletonFilter, points: np.ndarray, heading: float) -> np.ndarray:
@@ -178,28 +181,45 @@ def initialise_facing(filt: SkeletonFilter, points: np.ndarray, heading: float) 
 
 
 def search_limb_again(
-    filt: SkeletonFilter, points: np.ndarray, limb: str, particles: int | None = None
+    filt: SkeletonFilter,
+    points: np.ndarray,
+    limb: str,
+    particles: int | None = None,
+    layers: int | None = None,
+    margin: float | None = None,
 ) -> bool:
     """:func:`search_limb` from the current estimate, its pose kept only where the whole
-    body's likelihood rose; the limb's particles then all take the estimate. The search
-    anneals the first ``particles`` of them (None: all). Returns whether the limb moved."""
+    body's likelihood rose (with a ``margin``, also the likelihood without the arms'
+    collision prior, by more than it: the data, not the prior alone, must prefer the new
+    pose); the limb's particles then all take the estimate. The search anneals the first
+    ``particles`` of them (None: all) over ``layers`` layers (None: ``init_layers``).
+    Returns whether the limb moved."""
     dims = list(PARTITIONS[limb])
     before, kept = filt.estimate.copy(), filt.particles
-    score = pose_log_likelihood(filt, points, before)
+    score, data = _scores(filt, points, before)
     if particles is not None:
         filt.particles = kept[:particles].copy()
-    search_limb(filt, points, limb)
+    search_limb(filt, points, limb, layers)
     filt.particles = kept
-    moved = pose_log_likelihood(filt, points, filt.estimate) > score
+    after, after_data = _scores(filt, points, filt.estimate)
+    moved = after > score and (margin is None or after_data > data + margin)
     if not moved:
         filt.estimate = before
     filt.particles[:, dims] = filt.estimate[dims]
     return moved
 
 
-def search_limb(filt: SkeletonFilter, points: np.ndarray, limb: str) -> None:
+def _scores(filt: SkeletonFilter, points: np.ndarray, state: np.ndarray) -> tuple[float, float]:
+    """:func:`pose_log_likelihood` of one pose with the arms' collision prior and without."""
+    data = pose_log_likelihood(filt, points, state, prior=False)
+    return data - arm_collision_cost(state, filt.shape, filt.params), data
+
+
+def search_limb(
+    filt: SkeletonFilter, points: np.ndarray, limb: str, layers: int | None = None
+) -> None:
     """A limb's coarse search: angles drawn uniformly within its limits, annealed over
-    ``init_layers`` layers against the rest of the estimate."""
+    ``layers`` layers (None: ``init_layers``) against the rest of the estimate."""
     dims = list(PARTITIONS[limb])
     low, high = LIMITS[dims, 0], LIMITS[dims, 1]
     n = len(filt.particles)
@@ -211,7 +231,8 @@ def search_limb(filt: SkeletonFilter, points: np.ndarray, limb: str) -> None:
     filt.particles[:rest, dims] = np.clip(near, low, high)
     spread = np.zeros(D)
     spread[dims] = _LIMB_SPREAD
-    filt.anneal(points, limb, int(filt.params.init_layers), spread)
+    layers = int(filt.params.init_layers) if layers is None else layers
+    filt.anneal(points, limb, layers, spread)
 
 
 def initialise(filt: SkeletonFilter, points: np.ndarray) -> np.ndarray:

@@ -242,6 +242,17 @@ SKELETON_PARAMS = register(
                 "cloud better (0: never).",
             ),
             Param(
+                "limb_check_s",
+                0.0,
+                min=0.0,
+                max=30.0,
+                step=0.1,
+                unit="s",
+                help="While tracking, each limb in turn is searched again about this often "
+                "(a short search), kept where the whole body explains the cloud better "
+                "(0: never; 0.5 helped three sensors and hurt two).",
+            ),
+            Param(
                 "facing_speed",
                 0.5,
                 min=0.0,

@@ -8,7 +8,11 @@ joints of optrack/skeleton/joints.py, a confidence per joint, and a state:
   ``track_fraction`` of the cloud; the first frame runs the coarse-to-fine
   search (optrack/skeleton/init.py), the next ones refine it as tracking does
   and, for ``limb_research_s``, search one limb again a frame, in turn;
-- ``tracking``: the estimate explains at least ``track_fraction``;
+- ``tracking``: the estimate explains at least ``track_fraction``; with
+  ``limb_check_s`` (off by default) each limb, in turn, is checked about that often by
+  a short search again, kept only where the whole body explains the cloud better (a
+  limb held on points another part explains, an arm raised along the head while it
+  hangs, is found again);
 - ``lost``: the likelihood collapsed (under ``lost_fraction`` explained, or
   fewer than ``min_points`` points) for ``lost_frames`` frames in a row; the
   next frame with enough points initialises again.
@@ -77,6 +81,24 @@ _FACING_TURN = 1.0
 # body's height in 2 of 6 runs).
 _RESEARCH_SHARE = 0.5
 _RESEARCH_MIN = 1000
+# The periodic check of a limb while tracking (limb_check_s): a short search (these
+# particles over these layers, about a fifth of the search above's cost) from angles drawn
+# anywhere within the limb's limits, kept only where the whole body's likelihood rose. A
+# limb held on points it does not own (a walker's hanging arm put overhead, along the head,
+# its bones' support 0.5-1 where a found limb's is 0.3-1) is not noticed by its support,
+# but the whole body explains the cloud better with the limb found (by 0.3-1.3 in log
+# likelihood on the walk clip): the likelihood decides, not a support threshold. Off by
+# default: over six clips x seeds 0-5 it helped three sensors and hurt two (an unseen arm
+# moved onto the trunk's points; docs/skeleton.md).
+_CHECK_PARTICLES = 400
+_CHECK_LAYERS = 6
+# How much more the data (the likelihood without the arms' collision prior) must like the
+# check's pose. With two sensors an unseen arm that tracking had pushed into the trunk
+# (prior 1.17) was moved by the check onto the head's and chest's points, folded overhead
+# (prior 0.05, wrist 0.3 -> 0.8 m off): the prior paid for the move, the data gained 0.04.
+# The walk's arm found again gained 0.28 in the data; moves of a limb already found gained
+# 0-0.09 (walk, squat).
+_CHECK_MARGIN = 0.1
 # The parts whose support tells whether a limb is lost: its bones (the feet, cut by the
 # fusion's floor margin, hold few points even when found).
 _LIMB_PARTS = {
@@ -115,6 +137,7 @@ class SkeletonTracker:
         self._stamp: float | None = None
         self._started = -np.inf  # when the skeleton last initialised
         self._turn = 0  # the next limb searched again after initialisation
+        self._checked = -np.inf  # when a limb was last checked while tracking
         self._backwards = 0  # frames in a row moving against where the pelvis faces
         self._misses = 0
 
@@ -183,8 +206,9 @@ class SkeletonTracker:
         skeleton started, one limb a frame in turn (a limb hidden at the first frame, or
         lying on points it does not own, is found once the data show it); once tracking,
         each limb one of whose bones (upper arm, forearm, thigh, shin) holds under
-        ``limb_lost_support`` of the points its areas of interest should hold. A new pose
-        is kept where the whole body's likelihood rose. Returns whether a limb moved."""
+        ``limb_lost_support`` of the points its areas of interest should hold; else, once
+        tracking, one limb in turn each ``limb_check_s`` / 4 s, by a shorter search. A new
+        pose is kept where the whole body's likelihood rose. Returns whether a limb moved."""
         chosen = []
         if stamp - self._started < float(self.params.limb_research_s):
             chosen.append(LIMBS[self._turn % len(LIMBS)])
@@ -202,7 +226,25 @@ class SkeletonTracker:
         share = max(int(len(self.filter.particles) * _RESEARCH_SHARE), _RESEARCH_MIN)
         for limb in chosen:
             moved |= search_limb_again(self.filter, points, limb, share)
+        check = self._limb_to_check(stamp, chosen)
+        if check is not None:
+            particles = min(_CHECK_PARTICLES, len(self.filter.particles))
+            moved |= search_limb_again(
+                self.filter, points, check, particles, _CHECK_LAYERS, _CHECK_MARGIN
+            )
         return moved
+
+    def _limb_to_check(self, stamp: float, searched: list[str]) -> str | None:
+        """While tracking, after ``limb_research_s``: the limb whose turn it is to be
+        checked (a short search again), each limb about every ``limb_check_s``."""
+        period = float(self.params.limb_check_s)
+        if period <= 0.0 or self.state != "tracking" or searched:
+            return None
+        if stamp - self._checked < period / len(LIMBS) * 0.999:
+            return None
+        self._checked = stamp
+        self._turn += 1
+        return LIMBS[self._turn % len(LIMBS)]
 
     def _sample_shape(self, points: np.ndarray, stamp: float) -> None:
         """Keep a tracked frame for the body's estimate; estimate it once there are enough."""

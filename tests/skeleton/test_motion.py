@@ -1,7 +1,7 @@
 """The motion model: the root's velocity carried over (momentum) lets the filter follow a
 person who walks and turns fast, from their own clouds; a limb that lost its points
-searches wider (limb_search) or is searched again (limb_lost_support, limb_research_s);
-a skeleton facing backwards turns to face the motion (facing_speed)."""
+searches wider (limb_search) or is searched again (limb_lost_support, limb_research_s,
+limb_check_s); a skeleton facing backwards turns to face the motion (facing_speed)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 
 from optrack.skeleton.filter import SkeletonFilter, motion_spread
 from optrack.skeleton.joints import JOINTS
-from optrack.skeleton.model import PARTITIONS, BodyShape, forward_kinematics
+from optrack.skeleton.model import PARTITIONS, BodyShape, forward_kinematics, rest_state
 from optrack.skeleton.params import SKELETON_PARAMS
 from optrack.skeleton.tracker import SkeletonTracker
 from tests.skeleton.clouds import seen_cloud
@@ -78,7 +78,7 @@ def test_a_limb_without_support_diffuses_wider():
     assert np.array_equal(filt._widened(spread, "torso"), spread)
 
 
-def _raise_the_arm(lost_support: float, research_s: float = 0.0) -> float:
+def _raise_the_arm(lost_support: float, research_s: float = 0.0, check_s: float = 0.0) -> float:
     """Left wrist error (m) after a tracked person's left arm jumps overhead in one frame
     (the fourth, 0.1 s after the skeleton started)."""
     rng = np.random.default_rng(7)
@@ -86,6 +86,7 @@ def _raise_the_arm(lost_support: float, research_s: float = 0.0) -> float:
         {
             "limb_lost_support": lost_support,
             "limb_research_s": research_s,
+            "limb_check_s": check_s,
             "shape_seconds": 0.0,
             "particles": 1000,
         }
@@ -110,6 +111,35 @@ def test_a_lost_limb_is_searched_again():
 
 def test_limbs_are_searched_again_in_turn_after_initialisation():
     assert _raise_the_arm(0.0, research_s=1.0) < 0.08
+
+
+def _misplaced_arm(check_s: float, seed: int = 9) -> float:
+    """Right wrist error (m) 0.8 s after a tracked person's right arm, hanging at their
+    side, was put overhead in the estimate (on the head's and the chest's points: the walk
+    clip held it so for seconds, its bones' support at 0.5-1)."""
+    rng = np.random.default_rng(seed)
+    params = SKELETON_PARAMS.create(
+        {"limb_check_s": check_s, "limb_research_s": 0.0, "shape_seconds": 0.0, "particles": 1000}
+    )
+    tracker = SkeletonTracker(params, SHAPE, seed=seed)
+    truth = rest_state(SHAPE, 0.0, 0.0, 0.4)
+    truth[13], truth[17] = 0.2, 0.2  # the arms a little away from the body
+    for k in range(3):
+        tracker.update(seen_cloud(truth, SHAPE, rng), k / 30)
+    overhead = [3.0, -0.6, 1.0, 0.8]  # the walk's wrong arm: raised along the head
+    tracker.filter.estimate[16:20] = overhead
+    tracker.filter.particles[:, 16:20] = overhead
+    for k in range(3, 27):
+        estimate = tracker.update(seen_cloud(truth, SHAPE, rng), k / 30)
+    wrist = JOINTS.index("right_wrist")
+    return float(
+        np.linalg.norm(estimate.joints[wrist] - forward_kinematics(truth, SHAPE)[0][wrist])
+    )
+
+
+def test_a_limb_on_wrong_points_is_found_by_the_periodic_check():
+    assert _misplaced_arm(0.0) > 0.3  # tracking alone leaves it overhead
+    assert _misplaced_arm(0.5) < 0.08
 
 
 def _walk_backwards_start(facing_speed: float) -> float:
