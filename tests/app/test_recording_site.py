@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import pytest
@@ -147,16 +148,24 @@ def test_pausing_keeps_the_people_stepping_moves_them_and_resuming_keeps_their_i
     # each sensor's next frame (pausing aligned the playheads on the furthest one)
     qtbot.waitUntil(lambda: all(_frames(window)[n] > frames[n] for n in frames), timeout=30000)
     stepped = _frames(window)
-    qtbot.wait(1000)
-    assert panel.paused and _frames(window) == stepped  # one frame, then still
-    after = set(window.top_view.track_positions())
+
     # The same people keep their IDs through the step (one of them may leave the view in
     # that frame). Newcomers do not count against it: a person whose track was still
     # tentative when the pause came, or, under load, a person seen at two instants by
     # sensors paused a few frames apart, gets a track once the step brings every sensor
-    # to the same instant.
+    # to the same instant. Under load a node busy with its stepped frame sends nothing
+    # meanwhile, and the people only it sees leave the top view until its frame comes:
+    # wait for the scene rather than a fixed time.
+    def kept_ids() -> set[int]:
+        return set(window.top_view.track_positions()) & set(before)
+
+    with contextlib.suppress(qtbot.TimeoutError):  # the assertion below says what was seen
+        qtbot.waitUntil(lambda: len(kept_ids()) >= len(before) - 1, timeout=10000)
+    qtbot.wait(500)
+    assert panel.paused and _frames(window) == stepped  # one frame, then still
+    after = set(window.top_view.track_positions())
     kept = after & set(before)
-    assert kept and len(kept) >= len(before) - 1, (before, after)
+    assert kept and len(kept) >= len(before) - 1, (before, after, stepped)
     played = _played(window)
     panel.pause_button.click()  # now "Resume"
     qtbot.waitUntil(lambda: not panel.paused and _played(window) > played + 0.1, timeout=30000)
