@@ -150,7 +150,7 @@ SKELETON_PARAMS = register(
             ),
             Param(
                 "collision_margin",
-                0.3,
+                0.0,
                 min=0.0,
                 max=1.0,
                 step=0.05,
