@@ -127,17 +127,14 @@ def _bucket(value: float, grid, buckets: int) -> int:
 
 
 @numba.njit(fastmath=True, inline="always")
-def _part_block(qx, qy, qz, qb, qa, g, near, far, first, count):
-    """Eq. 7-8 for one part, geometry row ``g``, on points ``first`` to ``first + count``
-    of a run (views): each point's best distance to the parts so far and its area of
-    interest (``near`` or ``far``). No branches: with ``count`` the constant W it is one
-    vector of W points."""
+def _part_run(qx, qy, qz, qb, qa, g, near, far):
+    """Eq. 7-8 for one part, geometry row ``g``, on a run of points (views): each point's
+    best distance to the parts so far and its area of interest (``near`` or ``far``)."""
     ax, ay, az, ux, uy, uz = g[0], g[1], g[2], g[3], g[4], g[5]
     ex, ey, ez, fx, fy, fz = g[6], g[7], g[8], g[9], g[10], g[11]
     s0, s1, r0, dr, inv_length = g[12], g[13], g[14], g[15], g[16]
     half = np.float32(0.5) / inv_length
-    for j in range(count):
-        i = first + j
+    for i in range(qx.shape[0]):  # no branches: it vectorises
         vx, vy, vz = qx[i] - ax, qy[i] - ay, qz[i] - az
         s = vx * ux + vy * uy + vz * uz
         e = vx * ex + vy * ey + vz * ez
@@ -148,16 +145,6 @@ def _part_block(qx, qy, qz, qb, qa, g, near, far, first, count):
         better = d < qb[i]
         qb[i] = d if better else qb[i]
         qa[i] = (far if s >= half else near) if better else qa[i]
-
-
-@numba.njit(fastmath=True, inline="always")
-def _part_run(qx, qy, qz, qb, qa, g, near, far):
-    """Eq. 7-8 for one part on a run of points (views), whole blocks of W points first."""
-    whole = qx.shape[0] // W * W
-    for first in range(0, whole, W):
-        _part_block(qx, qy, qz, qb, qa, g, near, far, first, W)
-    # Only a cloud smaller than the run leaves a remainder.
-    _part_block(qx, qy, qz, qb, qa, g, near, far, whole, qx.shape[0] - whole)
 
 
 @numba.njit(fastmath=True, inline="always")
@@ -197,12 +184,9 @@ def likelihood_within(
     for k in range(geometry.shape[0]):
         g = geometry[k]
         low, high = runs[2 * k], runs[2 * k + 1]
-        # The part's run: from the first point of its low end's bucket, whole blocks of W
-        # up to its high end's bucket (moved back where it would pass the cloud's end).
-        lo = starts[_bucket(low, grid, starts.shape[0] - 1)]
-        size = -(-(starts[_bucket(high, grid, starts.shape[0] - 1) + 1] - lo) // W) * W
-        hi = min(lo + size, n)
-        lo = max(hi - size, 0)
+        # Whole blocks of W from 0 on views: no remainder, no wraparound; it vectorises.
+        lo = starts[_bucket(low, grid, starts.shape[0] - 1)] // W * W
+        hi = min(-(-starts[_bucket(high, grid, starts.shape[0] - 1) + 1] // W) * W, n)
         runs[2 * k], runs[2 * k + 1] = lo, hi
         near, far = np.int32(2 * k), np.int32(2 * k + 1)
         _part_run(px[lo:hi], py[lo:hi], pz[lo:hi], best[lo:hi], area[lo:hi], g, near, far)
