@@ -33,6 +33,7 @@ from optrack.skeleton.fusion import FUSION_PARAMS
 from optrack.skeleton.joints import JOINTS
 from optrack.skeleton.model import BodyShape, rest_state
 from optrack.skeleton.params import SKELETON_PARAMS
+from optrack.skeleton.tracker import SkeletonTracker
 from optrack.types import Detection, DetectionBatch, Track, TrackBatch
 
 from ..skeleton.clouds import seen_cloud
@@ -110,10 +111,7 @@ class Running:
         self.bus = make_client("skeleton")
         live = {
             "skeleton_live": SKELETON_LIVE_PARAMS.create({"enabled": enabled}),
-            # Fewer than the default 2000 for speed, but not too few: the first update
-            # compiles numba code (about 25 s on a cold cache), so the next comes 0.2 s
-            # (max_dt) of motion later, and at 300 particles the head then drifted
-            # 0.3 m in 8 of 20 seeded runs of that (0 of 20 at 1000).
+            # Fewer than the default 2000 for speed, but not too few (see ``compiled``).
             "skeleton": SKELETON_PARAMS.create({"particles": 1000}),
             "skeleton_fusion": FUSION_PARAMS.create(),
         }
@@ -160,8 +158,23 @@ class Running:
         self.node.close()
 
 
+@pytest.fixture(scope="module")
+def compiled():
+    """The skeleton's numba code compiled (and cached) before a node runs it. On a cold
+    cache (a fresh clone) the node's first update compiles for about 25 s, so its next
+    comes a whole max_dt (0.2 s) of motion later: at 300 particles the head then drifted
+    0.3 m in 8 of 20 seeded runs, and at 1000 the torso still sank 0.2 m in 1 of 3
+    fresh-cache runs of this file. A node on a warm cache updates every frame."""
+    shape = BodyShape.from_height(1.75)
+    state = rest_state(shape, 1.0, 2.0, 0.3)
+    rng = np.random.default_rng(0)
+    tracker = SkeletonTracker(SKELETON_PARAMS.create({"particles": 1000}), seed=0)
+    for frame in range(3):
+        tracker.update(seen_cloud(state, shape, rng, points=250, sensors=2), frame / 30)
+
+
 @pytest.fixture
-def running(hub, make_client, request):
+def running(hub, make_client, request, compiled):
     node = Running(hub, make_client, request.param)
     yield node
     node.close()
