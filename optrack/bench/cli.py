@@ -11,7 +11,7 @@ import argparse
 from collections.abc import Iterable
 from typing import Any
 
-from optrack.cli import EXIT_OK, add_json, emit_json, info
+from optrack.cli import EXIT_OK, CommandError, add_json, emit_json, info
 
 __all__ = [
     "BENCHES",
@@ -111,16 +111,39 @@ def cmd_bench_e2e(args: argparse.Namespace) -> int:
 
 def cmd_bench_skeleton(args: argparse.Namespace) -> int:
     """Speed and accuracy of the skeleton stage on real CMU motion."""
-    from optrack.bench.skeleton import skeleton_bench
+    from optrack.bench.common import shared_data
+    from optrack.bench.skeleton import all_clips, skeleton_bench
 
-    result = skeleton_bench()
+    clips = None
+    if getattr(args, "clips", None):
+        clips = tuple(c.strip() for c in args.clips.split(",") if c.strip())
+        clips = tuple(c if c.endswith(".bvh") else f"{c}.bvh" for c in clips)
+        unknown = sorted(set(clips) - set(all_clips()))
+        if unknown:
+            raise CommandError(
+                f"--clips names {', '.join(unknown)}, not a clip of "
+                f"{shared_data() / 'mocap'}; choose among {', '.join(all_clips()) or 'none'}."
+            )
+    for name in ("seeds", "jobs"):
+        if getattr(args, name, 1) < 1:
+            raise CommandError(f"--{name} must be at least 1 (got {getattr(args, name)}).")
+    if getattr(args, "seconds", 4.0) <= 0:
+        raise CommandError(f"--seconds must be positive (got {args.seconds:g}).")
+    result = skeleton_bench(
+        seconds=getattr(args, "seconds", 4.0),
+        clips=clips,
+        seeds=getattr(args, "seeds", 1),
+        jobs=getattr(args, "jobs", 1),
+        config=getattr(args, "config", None),
+    )
     if "skipped" in result:
         return _report(args, result, [result["skipped"]])
     three = result["accuracy"]["3_sensors"]
     line = (
         f"{result['fps_1person_3sensors']} fps (one person, 3 sensors), "
         f"{result['fps_4people_3sensors']} per person with four; 3 sensors: mean marker error "
-        f"{three['mean_error_m']} m, {three['lost_pct']} % lost"
+        f"{three['mean_error_m']} m, {three['lost_pct']} % lost "
+        f"({len(result['clips'])} clip(s) x {result['seeds']} seed(s))"
     )
     return _report(args, result, [line])
 
@@ -190,5 +213,26 @@ def add_commands(commands: Any, command: Any) -> None:
     p.add_argument(
         "--pcl-binary",
         help="detection: PCL's people_bench harness to time against, pinned to one core",
+    )
+    p.add_argument(
+        "--clips",
+        help="skeleton: the mocap clips to score, comma-separated names "
+        "(default: every clip of ../shared/data/mocap)",
+    )
+    p.add_argument(
+        "--seeds", type=int, default=1, help="skeleton: tracker seeds per clip and setting"
+    )
+    p.add_argument(
+        "--seconds", type=float, default=4.0, help="skeleton: seconds each clip is performed"
+    )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="skeleton: accuracy runs at once (processes; the speed runs stay alone)",
+    )
+    p.add_argument(
+        "--config",
+        help="skeleton: YAML parameter file (its skeleton and skeleton_fusion stages)",
     )
     add_json(p)

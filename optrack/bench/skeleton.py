@@ -8,22 +8,28 @@ floor position, the four markers). Recordings are rendered once and cached
 (:func:`optrack.bench.tracking.bench_cache`, keyed by the clip, the setting
 and a digest of the simulator's code).
 
-* Accuracy: each clip of :data:`ACCURACY_CLIPS`, one person for
-  ``seconds``, the performer kept in the middle of the room (``AREA``: where
-  the three sensors' views overlap), scored with the three sensors, the first
-  two, and the first alone: the same recording, so the settings differ only
-  by the sensors fused. ``accuracy`` holds each setting's figures over all
-  those clips together and per clip, ``initialisation`` among them: how soon
-  each person is tracked after they appear (``init_s`` per clip, its median
-  and maximum, ``init_within_1s``; :func:`~optrack.evaluation.skeleton.initialisation_times`):
-  each clip has its performer enter in the pose it starts with.
+* Accuracy: each clip (by default every clip of ../shared/data/mocap: the
+  issue's "any clip"), one person for ``seconds``, the performer kept in the
+  middle of the room (``AREA``: where the three sensors' views overlap),
+  scored with the three sensors, the first two, and the first alone: the same
+  recording, so the settings differ only by the sensors fused; each run
+  repeated for ``seeds`` tracker seeds (0, 1, ...: the filter's draws and
+  the clouds' decimation). ``accuracy`` holds each setting's figures over all
+  those runs together, ``runs_over_0_10`` (runs whose mean is over 0.1 m),
+  and per clip (over its seeds, with each seed's mean), ``initialisation``
+  among them: how soon each person is tracked after they appear (``init_s``
+  per clip and seed, its median and maximum, ``init_within_1s``;
+  :func:`~optrack.evaluation.skeleton.initialisation_times`): each clip has
+  its performer enter in the pose it starts with. ``jobs`` runs that many
+  accuracy runs at once (separate processes); the speed figures come from
+  runs of their own, one at a time, after them.
 * Initialisation in a crowd: ``initialisation_4people_3sensors``, the four
   performers of the speed run below (each clip's first pose), three sensors.
 * Speed: ``fps_1person_3sensors`` (person-frames per second of the stage:
   backprojection of each person's image rectangle, crop, decimation and the
   tracker's update) on the first clip with three sensors, and
-  ``fps_4people_3sensors`` per person with four performers; both leave out
-  each run's first frame (initialisation, and numba's compilation);
+  ``fps_4people_3sensors`` per person with four performers (tracker seed
+  0); both leave out each run's first frame (initialisation, and numba's compilation);
   ``ms_per_frame_p50``/``_p95`` are of one person's frames with three
   sensors (wall time), ``cpu_ms_per_frame_p50`` the CPU time of those frames
   (every thread's): on a loaded machine the better guide. The machine's load
@@ -33,8 +39,10 @@ and a digest of the simulator's code).
 from __future__ import annotations
 
 import hashlib
+import multiprocessing
 import os
 import shutil
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +51,7 @@ import numpy as np
 
 from optrack.bench.common import info, shared_data
 from optrack.bench.tracking import bench_cache
+from optrack.evaluation.run import _config, _create
 from optrack.evaluation.skeleton import (
     SkeletonRun,
     initialisation_times,
@@ -50,13 +59,13 @@ from optrack.evaluation.skeleton import (
     score_initialisation,
     score_markers,
 )
+from optrack.params import Params
 from optrack.recording import Recording
 from optrack.skeleton.fusion import FUSION_PARAMS
 from optrack.skeleton.params import SKELETON_PARAMS
 
-__all__ = ["ACCURACY_CLIPS", "AREA", "SPEED_CLIPS", "skeleton_bench"]
+__all__ = ["AREA", "SPEED_CLIPS", "all_clips", "skeleton_bench"]
 
-ACCURACY_CLIPS = ("cmu_16_27_walk_turn_left.bvh", "cmu_13_30_jumping_jacks_excerpt.bvh")
 SPEED_CLIPS = (
     "cmu_16_27_walk_turn_left.bvh",
     "cmu_13_30_jumping_jacks_excerpt.bvh",
@@ -66,6 +75,11 @@ SPEED_CLIPS = (
 AREA = (-1.2, -1.2, 1.2, 1.2)  # where one performer stays: seen by all three sensors
 SEED = 1  # a placement the three sensors see throughout (seed 0 puts the walk out of one's view)
 SETTINGS = (("3_sensors", 3), ("2_sensors", 2), ("1_sensor", 1))
+
+
+def all_clips() -> tuple[str, ...]:
+    """Every BVH clip of ../shared/data/mocap, by name."""
+    return tuple(sorted(p.name for p in (shared_data() / "mocap").glob("*.bvh")))
 
 
 def _digest(clips: list[Path]) -> str:
@@ -79,13 +93,14 @@ def _digest(clips: list[Path]) -> str:
     return digest.hexdigest()[:10]
 
 
-def _recording(clips: list[Path], people: int, seconds: float, area: bool) -> Recording:
-    """A mocap recording (three Kinect v2), rendered once and cached."""
+def _recording(clips: list[Path], people: int, seconds: float, area: bool) -> Path:
+    """A mocap recording (three Kinect v2), rendered once and cached: its folder."""
     from optrack.sim import Simulation, load_scenario
     from optrack.sim.recorder import write_recording
 
     names = "+".join(c.stem for c in clips)
-    key = f"skeleton-{names}-{people}p-{seconds:g}s-seed{SEED}-{_digest(clips)}"
+    where = "-centre" if area else ""
+    key = f"skeleton-{names}-{people}p-{seconds:g}s-seed{SEED}{where}-{_digest(clips)}"
     folder = bench_cache() / key
     if not (folder / "recording" / "manifest.yaml").is_file():
         scenario = load_scenario("mocap")
@@ -106,55 +121,128 @@ def _recording(clips: list[Path], people: int, seconds: float, area: bool) -> Re
         folder.mkdir(parents=True, exist_ok=True)
         write_recording(sim, partial)
         partial.rename(folder / "recording")
-    return Recording(folder / "recording")
+    return folder / "recording"
 
 
-def _run(recording: Recording, sensors: int, label: str) -> SkeletonRun:
-    info(f"bench skeleton: {label}, {sensors} sensor(s)")
+# A parameter file's values of the two stages, plain dicts (they cross to worker processes).
+Stages = tuple[dict[str, Any], dict[str, Any]] | None
+
+
+def _run(path: Path, sensors: int, label: str, seed: int = 0, stages: Stages = None) -> SkeletonRun:
+    """The skeleton over the recording at ``path`` with its first ``sensors`` sensors;
+    ``stages``: the ``skeleton`` and ``skeleton_fusion`` values (None: the defaults)."""
+    info(f"bench skeleton: {label}, {sensors} sensor(s), seed {seed}")
+    recording = Recording(path)
     poses = {s: np.asarray(i.world_T_camera) for s, i in recording.sensors.items()}
-    return run_skeleton(recording, poses, recording.sensor_ids[:sensors])
+    skeleton, fusion = (None, None) if stages is None else _params(stages, None)
+    return run_skeleton(
+        recording, poses, recording.sensor_ids[:sensors], skeleton, fusion, seed=seed
+    )
 
 
-def _accuracy(runs: dict[str, dict[str, SkeletonRun]]) -> dict[str, Any]:
-    """Each setting's figures over every clip, and per clip."""
+def _params(stages: Stages, path: str | None) -> tuple[Params, Params]:
+    """The ``skeleton`` and ``skeleton_fusion`` parameters of ``stages`` (checked)."""
+    skeleton, fusion = stages if stages is not None else ({}, {})
+    return _create(SKELETON_PARAMS, skeleton, path), _create(FUSION_PARAMS, fusion, path)
+
+
+def _accuracy(runs: dict[str, dict[str, list[SkeletonRun]]]) -> dict[str, Any]:
+    """Each setting's figures over every clip and seed, and per clip (over its seeds)."""
     out: dict[str, Any] = {}
     for setting, _ in SETTINGS:
         per_clip = {clip: runs[clip][setting] for clip in runs}
-        pooled = score_markers(np.concatenate([r.errors for r in per_clip.values()]))
+        every = [run for seeded in per_clip.values() for run in seeded]
+        pooled = score_markers(np.concatenate([r.errors for r in every]))
+        means = [score_markers(r.errors)["mean_error_m"] for r in every]
+        pooled["runs"] = len(every)
+        pooled["runs_over_0_10"] = sum(1 for m in means if m is None or m > 0.1)
         times = {
-            f"{clip}/{pid}": t
-            for clip, run in per_clip.items()
+            f"{clip}/{seed}/{pid}": t
+            for clip, seeded in per_clip.items()
+            for seed, run in enumerate(seeded)
             for pid, t in initialisation_times(run.errors, run.person_ids, run.stamps).items()
         }
         pooled["initialisation"] = score_initialisation(times)
-        pooled["clips"] = {
-            clip: {k: v for k, v in run.figures().items() if k != "sensors"}
-            for clip, run in per_clip.items()
-        }
+        pooled["clips"] = {}
+        for clip, seeded in per_clip.items():
+            figures = score_markers(np.concatenate([r.errors for r in seeded]))
+            figures["mean_error_m_by_seed"] = [
+                score_markers(r.errors)["mean_error_m"] for r in seeded
+            ]
+            figures["initialisation"] = score_initialisation(
+                {
+                    f"{seed}/{pid}": t
+                    for seed, run in enumerate(seeded)
+                    for pid, t in initialisation_times(
+                        run.errors, run.person_ids, run.stamps
+                    ).items()
+                }
+            )
+            pooled["clips"][clip] = figures
         out[setting] = pooled
     return out
 
 
+def _accuracy_runs(
+    recordings: dict[str, Path], seeds: int, jobs: int, stages: Stages
+) -> dict[str, dict[str, list[SkeletonRun]]]:
+    """Every clip x setting x seed run, ``jobs`` at a time (separate processes)."""
+    tasks = [
+        (clip, setting, count, seed)
+        for clip in recordings
+        for setting, count in SETTINGS
+        for seed in range(seeds)
+    ]
+    runs: dict[str, dict[str, list[SkeletonRun]]] = {
+        clip: {setting: [] for setting, _ in SETTINGS} for clip in recordings
+    }
+    if jobs <= 1:
+        done = [_run(recordings[c], n, c, seed, stages) for c, _, n, seed in tasks]
+    else:
+        context = multiprocessing.get_context("spawn")  # numba and threads: no fork
+        with ProcessPoolExecutor(jobs, mp_context=context) as pool:
+            futures = [
+                pool.submit(_run, recordings[c], n, c, seed, stages) for c, _, n, seed in tasks
+            ]
+            done = [f.result() for f in futures]
+    for (clip, setting, _, _), run in zip(tasks, done, strict=True):
+        runs[clip][setting].append(run)
+    return runs
+
+
 def skeleton_bench(
-    seconds: float = 3.0,
-    clips: tuple[str, ...] = ACCURACY_CLIPS,
+    seconds: float = 4.0,
+    clips: tuple[str, ...] | None = None,
     speed_seconds: float = 2.0,
+    seeds: int = 1,
+    jobs: int = 1,
+    config: str | None = None,
 ) -> dict[str, Any]:
-    """The figures of ``optrack bench skeleton --json`` (see the module docstring);
-    ``{"skipped": reason}`` without the CMU clips."""
+    """The figures of ``optrack bench skeleton --json`` (see the module docstring):
+    ``clips`` by name (default: every clip of ../shared/data/mocap); ``config``: a YAML
+    parameter file whose ``skeleton`` and ``skeleton_fusion`` stages are used (as
+    ``optrack eval --config``); ``{"skipped": reason}`` without the CMU clips."""
     folder = shared_data() / "mocap"
+    clips = all_clips() if clips is None else tuple(clips)
     missing = [c for c in (*clips, *SPEED_CLIPS) if not (folder / c).is_file()]
-    if missing:
-        return {"skipped": f"the CMU clips are not in {folder} ({', '.join(missing)} missing)."}
-    runs: dict[str, dict[str, SkeletonRun]] = {}
-    for clip in clips:
-        recording = _recording([folder / clip], 1, seconds, area=True)
-        runs[Path(clip).stem] = {
-            setting: _run(recording, count, Path(clip).stem) for setting, count in SETTINGS
-        }
-    alone = runs[Path(clips[0]).stem]["3_sensors"]
+    if missing or not clips:
+        listed = ", ".join(missing) if missing else "no .bvh file"
+        return {"skipped": f"the CMU clips are not in {folder} ({listed} missing)."}
+    if seeds < 1 or jobs < 1 or seconds <= 0 or speed_seconds <= 0:
+        raise ValueError(
+            f"bench skeleton needs seeds and jobs of at least 1 and positive seconds "
+            f"(got seeds {seeds}, jobs {jobs}, seconds {seconds:g}, speed seconds "
+            f"{speed_seconds:g})."
+        )
+    values = _config(config)
+    stages: Stages = (dict(values.get("skeleton", {})), dict(values.get("skeleton_fusion", {})))
+    skeleton, fusion = _params(stages, config)  # checked before minutes of work
+    recordings = {Path(c).stem: _recording([folder / c], 1, seconds, area=True) for c in clips}
     crowd = _recording([folder / c for c in SPEED_CLIPS], 4, speed_seconds, area=False)
-    four = _run(crowd, 3, "four people")
+    runs = _accuracy_runs(recordings, seeds, jobs, stages)
+    # Speed: runs of their own, one at a time (the accuracy runs may share the cores).
+    alone = _run(recordings[Path(clips[0]).stem], 3, "speed, one person", 0, stages)
+    four = _run(crowd, 3, "speed, four people", 0, stages)
     skip = 1 if len(alone.frame_ms) > 1 else 0
     steady, cpu = alone.frame_ms[skip:], alone.frame_cpu_ms[skip:]
     return {
@@ -163,11 +251,14 @@ def skeleton_bench(
         "ms_per_frame_p50": round(float(np.percentile(steady, 50)), 1),
         "ms_per_frame_p95": round(float(np.percentile(steady, 95)), 1),
         "cpu_ms_per_frame_p50": round(float(np.percentile(cpu, 50)), 1),
-        "particles": int(SKELETON_PARAMS.create().particles),
-        "points_per_person": int(FUSION_PARAMS.create().points),
+        "particles": int(skeleton.particles),
+        "points_per_person": int(fusion.points),
         "points_per_person_mean": round(float(np.mean(alone.points)), 1),
         "accuracy": _accuracy(runs),
         "initialisation_4people_3sensors": four.initialisation(),
+        "clips": [Path(c).stem for c in clips],
+        "seeds": seeds,
+        "config": config,
         "seconds_per_clip": seconds,
         "load_average": round(os.getloadavg()[0], 2),
         "cpu_count": os.cpu_count(),

@@ -15,8 +15,10 @@ in the venue (:func:`add_performers` picks where each person starts and, at each
 loop, how far to turn so that the path stays clear of walls, furniture and the
 other performers). A clip shorter than the scene plays again from where it ended:
 the next loop starts at the last frame's position and heading (a turn, when one is
-needed, eases in over the loop's first second), and the pose eases from the last
-frame into the first over ``blend`` seconds.
+needed, eases in over the loop's first ``TURN_SECONDS``: the heading turns and the
+hips go on at the clip's own pace along the turned direction, as a person turning
+while they move; the path already run is not swung round), and the pose eases from
+the last frame into the first over ``blend`` seconds.
 """
 
 from __future__ import annotations
@@ -249,6 +251,9 @@ class _Loop:
     start: np.ndarray  # world xy of the hips when the loop starts
     heading: float  # world heading when the loop starts
     turn: float  # extra turn eased in over the loop's first TURN_SECONDS
+    # While the turn eases in: the hips' world path from ``start`` (n, 2), at the motion's
+    # frame times from 0 to TURN_SECONDS (built when first needed).
+    turning: tuple[np.ndarray, np.ndarray] | None = dataclasses.field(default=None, repr=False)
 
 
 class Performance(Behaviour):
@@ -286,13 +291,45 @@ class Performance(Behaviour):
         positions, _ = forward_kinematics(offsets, pose)
         self.lift = float(np.percentile(ground(positions, [shape] * len(taus)), GROUND_PERCENTILE))
 
+    def _yaw(self, plan: _Loop, tau: np.ndarray) -> np.ndarray:
+        return plan.heading + plan.turn * _ease(tau / TURN_SECONDS) - self._first_heading
+
     def _transform(self, loop: int, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The world yaw (n,) and translation (n, 2) that place the motion's points at
-        ``tau`` seconds into ``loop``."""
+        ``tau`` seconds into ``loop``: the hips' world position is ``start`` plus their
+        steps in the clip, each turned by the yaw of its time (a turn changes where the
+        hips go next, not where they have been)."""
         plan = self.loops[loop]
-        yaw = plan.heading + plan.turn * _ease(tau / TURN_SECONDS) - self._first_heading
-        shift = plan.start - np.einsum("nij,j->ni", _rot2(yaw), self._first_xy * self.scale)
+        tau = np.asarray(tau, dtype=np.float64)
+        yaw = self._yaw(plan, tau)
+        local = self.motion.hips_at(tau)[:, :2] * self.scale
+        if plan.turn == 0.0:
+            first = self._first_xy * self.scale
+            world = plan.start + np.einsum("ij,nj->ni", _rot2(yaw[0]), local - first)
+        else:
+            if plan.turning is None:
+                plan.turning = self._turning(plan)
+            grid, path = plan.turning
+            done = np.minimum(tau, grid[-1])  # the part of tau spent turning
+            world = np.stack([np.interp(done, grid, path[:, k]) for k in range(2)], axis=-1)
+            after = local - self.motion.hips_at(done)[:, :2] * self.scale
+            world += np.einsum("nij,nj->ni", _rot2(yaw), after)  # yaw is constant after
+        shift = world - np.einsum("nij,nj->ni", _rot2(yaw), local)
         return yaw, shift
+
+    def _turning(self, plan: _Loop) -> tuple[np.ndarray, np.ndarray]:
+        """The hips' world path (n, 2) at times (n,) 0..TURN_SECONDS of a turning loop:
+        each of the clip's steps turned by the yaw at its middle."""
+        step = min(self.motion.frame_time, 1.0 / 120.0)
+        grid = np.linspace(0.0, TURN_SECONDS, int(math.ceil(TURN_SECONDS / step)) + 1)
+        local = self.motion.hips_at(grid)[:, :2] * self.scale
+        turned = np.einsum(
+            "nij,nj->ni",
+            _rot2(self._yaw(plan, 0.5 * (grid[1:] + grid[:-1]))),
+            np.diff(local, axis=0),
+        )
+        path = plan.start + np.concatenate([np.zeros((1, 2)), np.cumsum(turned, axis=0)])
+        return grid, path
 
     def _split(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         period = self.motion.period

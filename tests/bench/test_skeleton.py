@@ -6,7 +6,8 @@ from __future__ import annotations
 import math
 
 from optrack.bench.cli import BENCHES, cmd_bench_skeleton
-from optrack.bench.skeleton import skeleton_bench
+from optrack.bench.skeleton import all_clips, skeleton_bench
+from optrack.cli import main
 
 KEYS = {
     "fps_1person_3sensors",
@@ -24,7 +25,7 @@ FIGURES |= {"lost_pct", "frames"}
 def test_bench_skeleton_keys_on_a_few_frames(shared_data, tmp_path, monkeypatch):
     monkeypatch.setenv("OPTRACK_CACHE", str(tmp_path))
     clip = "cmu_16_27_walk_turn_left.bvh"
-    result = skeleton_bench(seconds=0.2, clips=(clip,), speed_seconds=0.1)
+    result = skeleton_bench(seconds=0.2, clips=(clip,), speed_seconds=0.1, seeds=2, jobs=2)
     assert KEYS <= set(result)
     assert result["particles"] == 2000 and result["points_per_person"] == 500
     for key in (
@@ -38,15 +39,40 @@ def test_bench_skeleton_keys_on_a_few_frames(shared_data, tmp_path, monkeypatch)
     assert set(result["accuracy"]) == {"3_sensors", "2_sensors", "1_sensor"}
     for setting in result["accuracy"].values():
         assert FIGURES <= set(setting)
-        assert setting["frames"] == 6  # 0.2 s at 30 Hz
+        assert setting["frames"] == 12  # 0.2 s at 30 Hz, two seeds
+        assert setting["runs"] == 2 and 0 <= setting["runs_over_0_10"] <= 2
         assert set(setting["clips"]) == {"cmu_16_27_walk_turn_left"}
+        walk = setting["clips"]["cmu_16_27_walk_turn_left"]
+        assert walk["frames"] == 12 and len(walk["mean_error_m_by_seed"]) == 2
         init = setting["initialisation"]
-        assert set(init["init_s"]) == {"cmu_16_27_walk_turn_left/0"}
+        assert set(init["init_s"]) == {
+            "cmu_16_27_walk_turn_left/0/0",
+            "cmu_16_27_walk_turn_left/1/0",
+        }
         assert set(init) == {"init_s", "init_s_median", "init_s_max", "init_within_1s"}
+    # The two seeds are two runs: the filter's draws differ, so do the estimates.
+    three = result["accuracy"]["3_sensors"]["clips"]["cmu_16_27_walk_turn_left"]
+    assert three["mean_error_m_by_seed"][0] != three["mean_error_m_by_seed"][1]
+    assert result["seeds"] == 2 and result["clips"] == ["cmu_16_27_walk_turn_left"]
     crowd = result["initialisation_4people_3sensors"]
     assert len(crowd["init_s"]) == 4 and 0.0 <= crowd["init_within_1s"] <= 1.0
     cached = sorted(p.name for p in (tmp_path / "bench").iterdir())
     assert len(cached) == 2 and all(p.startswith("skeleton-") for p in cached)
+
+
+def test_bench_skeleton_scores_every_clip_by_default(shared_data):
+    assert all_clips() == tuple(sorted(p.name for p in (shared_data / "mocap").glob("*.bvh")))
+    assert len(all_clips()) >= 6 and "cmu_131_02_alt_naming.bvh" in all_clips()
+
+
+def test_bench_skeleton_refuses_an_unknown_clip_and_bad_counts(shared_data, capsys):
+    code = main(["bench", "skeleton", "--clips", "cmu_16_27_walk_turn_left,not_a_clip"])
+    err = capsys.readouterr().err
+    assert code == 1 and "not_a_clip.bvh" in err and "cmu_16_27_walk_turn_left.bvh" in err
+    assert main(["bench", "skeleton", "--seeds", "0"]) == 1
+    assert "--seeds must be at least 1" in capsys.readouterr().err
+    assert main(["bench", "skeleton", "--seconds", "-1"]) == 1
+    assert "--seconds must be positive" in capsys.readouterr().err
 
 
 def test_bench_skeleton_skips_without_its_clips():

@@ -86,7 +86,9 @@ def test_the_reference_pose_is_skipped(shared_data):
 
 def test_a_short_clip_loops_from_where_it_ended_without_a_jump(shared_data):
     """The run (1.43 s) over 4 s: at each loop the hips go on from the last frame's
-    position and heading, and no joint moves more in a step than it does anywhere else."""
+    position and heading, no joint moves more in a step than it does anywhere else, and
+    a turn between loops keeps the clip's pace (it turns where the runner goes next; it
+    once swung the path already run round, the hips at twice a jog's speed)."""
     path = shared_data / "mocap" / "cmu_02_03_run.bvh"
     sim = Simulation("mocap", seed=0, people=1, seconds=4.0, clips=[str(path)])
     performer = sim.crowd.people[0].behaviour
@@ -107,7 +109,12 @@ def test_a_short_clip_loops_from_where_it_ended_without_a_jump(shared_data):
     for k in np.flatnonzero(at_loop):
         assert np.linalg.norm(pelvis[k + 1] - pelvis[k]) * rate < 1.2 * speed[~at_loop].max()
         assert abs(heading[k + 1] - heading[k]) < math.radians(3)
-    assert np.linalg.norm(pelvis[-1] - pelvis[0]) > 3.0  # it ran on (in the room)
+    assert speed.sum() / rate > 3.0  # it ran on (in the room)
+    clip = np.linalg.norm(np.diff(performer.motion.hips[:, :2], axis=0), axis=1)
+    clip_speed = clip.max() / performer.motion.frame_time * performer.scale
+    assert speed.max() < 1.1 * clip_speed
+    turns = [loop.turn for loop in performer.loops[1:3]]
+    assert any(turn != 0.0 for turn in turns)  # the room made it turn
     assert np.all(sim.venue.clearance(pelvis) > 0.25)
 
 
