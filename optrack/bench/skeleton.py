@@ -116,11 +116,14 @@ def _recording(clips: list[Path], people: int, seconds: float, area: bool) -> Pa
             clips=[str(c) for c in clips],
             seed=SEED,
         )
-        partial = folder / "partial"
+        partial = folder / f"partial-{os.getpid()}"  # two benches at once: one each
         shutil.rmtree(partial, ignore_errors=True)
         folder.mkdir(parents=True, exist_ok=True)
         write_recording(sim, partial)
-        partial.rename(folder / "recording")
+        try:
+            partial.rename(folder / "recording")
+        except OSError:  # another bench finished the same recording first: the same frames
+            shutil.rmtree(partial, ignore_errors=True)
     return folder / "recording"
 
 

@@ -12,13 +12,13 @@ leg length to the clip's. CMU takes start with a reference pose: frame 0 is skip
 
 A :class:`Performance` is a crowd behaviour that plays a motion: placed and turned
 in the venue (:func:`add_performers` picks where each person starts and, at each
-loop, how far to turn so that the path stays clear of walls, furniture and the
-other performers). A clip shorter than the scene plays again from where it ended:
-the next loop starts at the last frame's position and heading (a turn, when one is
-needed, eases in over the loop's first ``TURN_SECONDS``: the heading turns and the
-hips go on at the clip's own pace along the turned direction, as a person turning
-while they move; the path already run is not swung round), and the pose eases from
-the last frame into the first over ``blend`` seconds.
+leg of about ``LEG_SECONDS`` of the clip, how far to turn so that the path stays
+clear of walls, furniture and the other performers). A clip shorter than the scene
+plays again from where it ended: the next play starts at the last frame's position
+and heading, and the pose eases from the last frame into the first over ``blend``
+seconds. A turn eases in over a leg's first ``TURN_SECONDS``: the heading turns and
+the hips go on at the clip's own pace along the turned direction, as a person turning
+while they move (the path already run is not swung round).
 """
 
 from __future__ import annotations
@@ -58,9 +58,10 @@ __all__ = [
 ]
 
 BLEND_SECONDS = 0.3  # the pose eases from a loop's last frame into the next loop's first
-TURN_SECONDS = 0.5  # a turn between loops eases in over this long
+TURN_SECONDS = 0.5  # a turn between legs eases in over this long (at most the leg)
+LEG_SECONDS = 0.6  # a clip's play is cut into legs of about this long, each may turn
 PLAN_STEP = 0.1  # s between the path samples that placement checks
-LOOKAHEAD = 2  # loops a placement looks at: the one it plans and the next
+LOOKAHEAD = 2  # legs a placement looks at: the one it plans and the next
 PLACEMENT_TRIES = 100
 LOOP_TURNS_DEG = (0, 45, -45, 90, -90, 135, -135, 180)
 GROUND_PERCENTILE = 90  # of per-frame lifts: frames standing on the floor, not jumping
@@ -248,17 +249,23 @@ def _ease(x: np.ndarray) -> np.ndarray:
 
 @dataclasses.dataclass
 class _Loop:
-    start: np.ndarray  # world xy of the hips when the loop starts
-    heading: float  # world heading when the loop starts
-    turn: float  # extra turn eased in over the loop's first TURN_SECONDS
-    # While the turn eases in: the hips' world path from ``start`` (n, 2), at the motion's
-    # frame times from 0 to TURN_SECONDS (built when first needed).
+    """The plan of one leg of a performance (see :class:`Performance`)."""
+
+    start: np.ndarray  # world xy of the hips when the leg starts
+    heading: float  # world heading when the leg starts
+    turn: float  # extra turn eased in over the leg's first TURN_SECONDS (at most the leg)
+    # While the turn eases in: its times (n,) and the hips' world path from ``start``
+    # (n, 2), built when first needed.
     turning: tuple[np.ndarray, np.ndarray] | None = dataclasses.field(default=None, repr=False)
 
 
 class Performance(Behaviour):
     """A person playing ``motion`` from ``offset`` seconds into it, looped; placed by
-    :func:`add_performers`. The crowd keeps them where they start (anchored)."""
+    :func:`add_performers`. The crowd keeps them where they start (anchored).
+
+    Each play of the clip is cut into legs of about ``LEG_SECONDS``; ``loops`` holds one
+    plan per leg (where it starts, the heading there, the turn it eases in), so that a
+    performer who travels (a runner) can turn often enough to stay in the room."""
 
     def __init__(self, motion: Motion, offset: float = 0.0) -> None:
         self.motion = motion
@@ -267,10 +274,12 @@ class Performance(Behaviour):
         self.lift = 0.0
         self.loops: list[_Loop] = []
         period = motion.period
-        self._first_xy = motion.hips[0, :2]
-        self._first_heading = float(motion.headings(np.array([0.0]))[0])
-        self._last_heading = float(motion.headings(np.array([period]))[0])
-        self._last_xy = motion.hips[-1, :2]
+        self.legs = max(1, round(period / LEG_SECONDS))  # legs a play of the clip
+        self.leg = period / self.legs  # seconds a leg
+        self._turn_s = min(TURN_SECONDS, self.leg)  # a turn eases in within its leg
+        bounds = np.arange(self.legs + 1) * self.leg
+        self._leg_xy = motion.hips_at(bounds)[:, :2]  # the clip's hips where legs start/end
+        self._leg_heading = motion.headings(bounds)
 
     def start(self, crowd: Crowd, i: int) -> np.ndarray:
         return self.path(np.array([0.0]))[0]
@@ -291,51 +300,54 @@ class Performance(Behaviour):
         positions, _ = forward_kinematics(offsets, pose)
         self.lift = float(np.percentile(ground(positions, [shape] * len(taus)), GROUND_PERCENTILE))
 
-    def _yaw(self, plan: _Loop, tau: np.ndarray) -> np.ndarray:
-        return plan.heading + plan.turn * _ease(tau / TURN_SECONDS) - self._first_heading
+    def _clip_time(self, loop: int, tau: np.ndarray) -> np.ndarray:
+        """Seconds into the clip at ``tau`` seconds into leg ``loop``."""
+        return (loop % self.legs) * self.leg + np.asarray(tau, dtype=np.float64)
+
+    def _yaw(self, loop: int, tau: np.ndarray) -> np.ndarray:
+        plan = self.loops[loop]
+        turned = plan.turn * _ease(np.asarray(tau) / self._turn_s)
+        return plan.heading + turned - self._leg_heading[loop % self.legs]
 
     def _transform(self, loop: int, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The world yaw (n,) and translation (n, 2) that place the motion's points at
-        ``tau`` seconds into ``loop``: the hips' world position is ``start`` plus their
-        steps in the clip, each turned by the yaw of its time (a turn changes where the
-        hips go next, not where they have been)."""
+        ``tau`` seconds into leg ``loop``: the hips' world position is ``start`` plus
+        their steps in the clip, each turned by the yaw of its time (a turn changes where
+        the hips go next, not where they have been)."""
         plan = self.loops[loop]
         tau = np.asarray(tau, dtype=np.float64)
-        yaw = self._yaw(plan, tau)
-        local = self.motion.hips_at(tau)[:, :2] * self.scale
+        yaw = self._yaw(loop, tau)
+        local = self.motion.hips_at(self._clip_time(loop, tau))[:, :2] * self.scale
         if plan.turn == 0.0:
-            first = self._first_xy * self.scale
+            first = self._leg_xy[loop % self.legs] * self.scale
             world = plan.start + np.einsum("ij,nj->ni", _rot2(yaw[0]), local - first)
         else:
             if plan.turning is None:
-                plan.turning = self._turning(plan)
+                plan.turning = self._turning(loop)
             grid, path = plan.turning
             done = np.minimum(tau, grid[-1])  # the part of tau spent turning
             world = np.stack([np.interp(done, grid, path[:, k]) for k in range(2)], axis=-1)
-            after = local - self.motion.hips_at(done)[:, :2] * self.scale
-            world += np.einsum("nij,nj->ni", _rot2(yaw), after)  # yaw is constant after
+            turned = self.motion.hips_at(self._clip_time(loop, done))[:, :2] * self.scale
+            world += np.einsum("nij,nj->ni", _rot2(yaw), local - turned)  # yaw is constant
         shift = world - np.einsum("nij,nj->ni", _rot2(yaw), local)
         return yaw, shift
 
-    def _turning(self, plan: _Loop) -> tuple[np.ndarray, np.ndarray]:
-        """The hips' world path (n, 2) at times (n,) 0..TURN_SECONDS of a turning loop:
-        each of the clip's steps turned by the yaw at its middle."""
+    def _turning(self, loop: int) -> tuple[np.ndarray, np.ndarray]:
+        """The hips' world path (n, 2) at times (n,) 0.._turn_s into a turning leg: each
+        of the clip's steps turned by the yaw at its middle."""
         step = min(self.motion.frame_time, 1.0 / 120.0)
-        grid = np.linspace(0.0, TURN_SECONDS, int(math.ceil(TURN_SECONDS / step)) + 1)
-        local = self.motion.hips_at(grid)[:, :2] * self.scale
-        turned = np.einsum(
-            "nij,nj->ni",
-            _rot2(self._yaw(plan, 0.5 * (grid[1:] + grid[:-1]))),
-            np.diff(local, axis=0),
-        )
-        path = plan.start + np.concatenate([np.zeros((1, 2)), np.cumsum(turned, axis=0)])
-        return grid, path
+        grid = np.linspace(0.0, self._turn_s, int(math.ceil(self._turn_s / step)) + 1)
+        local = self.motion.hips_at(self._clip_time(loop, grid))[:, :2] * self.scale
+        middle = self._yaw(loop, 0.5 * (grid[1:] + grid[:-1]))
+        turned = np.einsum("nij,nj->ni", _rot2(middle), np.diff(local, axis=0))
+        start = self.loops[loop].start
+        return grid, start + np.concatenate([np.zeros((1, 2)), np.cumsum(turned, axis=0)])
 
     def _split(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        period = self.motion.period
+        """The leg (n,) and seconds into it (n,) at scene times ``t``."""
         u = np.asarray(t, dtype=np.float64) + self.offset
-        loop = np.minimum(np.floor(u / period).astype(int), len(self.loops) - 1)
-        return loop, u - loop * period
+        loop = np.minimum(np.floor(u / self.leg).astype(int), len(self.loops) - 1)
+        return loop, u - loop * self.leg
 
     def path(self, t: np.ndarray) -> np.ndarray:
         """World xy (n, 2) of the hips at scene times ``t`` (n,)."""
@@ -344,35 +356,37 @@ class Performance(Behaviour):
         for loop in np.unique(loops):
             here = loops == loop
             yaw, shift = self._transform(int(loop), taus[here])
-            hips = self.motion.hips_at(taus[here])
+            hips = self.motion.hips_at(self._clip_time(int(loop), taus[here]))
             out[here] = np.einsum("nij,nj->ni", _rot2(yaw), hips[:, :2] * self.scale) + shift
         return out
 
     def next_loop(self, turn: float) -> _Loop:
-        """The loop after the last planned one, with ``turn`` radians eased in."""
-        last = self.loops[-1]
-        yaw, shift = self._transform(len(self.loops) - 1, np.array([self.motion.period]))
-        start = _rot2(yaw)[0] @ (self._last_xy * self.scale) + shift[0]
-        heading = last.heading + last.turn + self._last_heading - self._first_heading
+        """The leg after the last planned one, with ``turn`` radians eased in."""
+        index = len(self.loops) - 1
+        last, j = self.loops[index], index % self.legs
+        yaw, shift = self._transform(index, np.array([self.leg]))
+        start = _rot2(yaw)[0] @ (self._leg_xy[j + 1] * self.scale) + shift[0]
+        heading = last.heading + last.turn + self._leg_heading[j + 1] - self._leg_heading[j]
         return _Loop(start, heading, turn)
 
     # --------------------------------------------------------------- posing
     def articulated(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """The pelvis's world position (3,) and local rotations (J, 3, 3) at scene time t."""
-        while t + self.offset >= len(self.loops) * self.motion.period:
+        while t + self.offset >= len(self.loops) * self.leg:
             self.loops.append(self.next_loop(0.0))  # past the planned scene: straight on
         loops, taus = self._split(np.array([t]))
         loop, tau = int(loops[0]), float(taus[0])
         root, local = self._at(loop, tau)
-        if loop > 0 and tau < BLEND_SECONDS and not self.motion.cyclic:
-            before_root, before = self._at(loop - 1, self.motion.period)
+        first_leg = loop % self.legs == 0  # the clip starts again here
+        if loop > 0 and first_leg and tau < BLEND_SECONDS and not self.motion.cyclic:
+            before_root, before = self._at(loop - 1, self.leg)
             weight = float(_ease(np.array(tau / BLEND_SECONDS)))
             local = blend(before, local, weight)
             root[2] = before_root[2] + (root[2] - before_root[2]) * weight
         return root, matrices(local)
 
     def _at(self, loop: int, tau: float) -> tuple[np.ndarray, np.ndarray]:
-        local, hips = self.motion.sample(np.array([tau]))
+        local, hips = self.motion.sample(self._clip_time(loop, np.array([tau])))
         yaw, shift = self._transform(loop, np.array([tau]))
         turn = np.array([0.0, 0.0, math.sin(yaw[0] / 2), math.cos(yaw[0] / 2)])
         local = local[0].copy()
@@ -422,7 +436,7 @@ class _Planner:
     ) -> None:
         self.performer, self.venue, self.area = performer, venue, area
         self.times, self.others = times, others
-        self.loop_of = np.floor((times + performer.offset) / performer.motion.period).astype(int)
+        self.loop_of = np.floor((times + performer.offset) / performer.leg).astype(int)
 
     def score(self, loop: int, depth: int = LOOKAHEAD) -> float:
         """How clear the planned ``loop`` (the last one) and the best next one stay."""

@@ -242,6 +242,18 @@ SKELETON_PARAMS = register(
                 "cloud better (0: never).",
             ),
             Param(
+                "limb_research_margin",
+                0.2,
+                min=0.0,
+                max=2.0,
+                step=0.05,
+                help="A limb searched again (limb_research_s, limb_lost_support) takes the "
+                "new pose only where the data's log-likelihood (without the arms' collision "
+                "prior) rises by more than this: a limb already found gains up to about "
+                "0.13 by chance, on points it does not own; a misplaced one gains 0.3 and "
+                "more.",
+            ),
+            Param(
                 "limb_check_s",
                 0.0,
                 min=0.0,

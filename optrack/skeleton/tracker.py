@@ -209,7 +209,9 @@ class SkeletonTracker:
         each limb one of whose bones (upper arm, forearm, thigh, shin) holds under
         ``limb_lost_support`` of the points its areas of interest should hold; else, once
         tracking, one limb in turn each ``limb_check_s`` / 4 s, by a shorter search. A new
-        pose is kept where the whole body's likelihood rose. Returns whether a limb moved."""
+        pose is kept where the whole body's likelihood rose and the data's (without the
+        arms' prior) by more than ``limb_research_margin`` (the check's: ``_CHECK_MARGIN``).
+        Returns whether a limb moved."""
         chosen = []
         if stamp - self._started < float(self.params.limb_research_s):
             chosen.append(LIMBS[self._turn % len(LIMBS)])
@@ -225,8 +227,9 @@ class SkeletonTracker:
         # The search keeps only its estimate (every particle takes it): it anneals a share
         # of the particles.
         share = max(int(len(self.filter.particles) * _RESEARCH_SHARE), _RESEARCH_MIN)
+        margin = float(self.params.limb_research_margin)
         for limb in chosen:
-            moved |= search_limb_again(self.filter, points, limb, share)
+            moved |= search_limb_again(self.filter, points, limb, share, None, margin)
         check = self._limb_to_check(stamp, chosen)
         if check is not None:
             particles = min(_CHECK_PARTICLES, len(self.filter.particles))

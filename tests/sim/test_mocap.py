@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import math
 
+import msgspec
 import numpy as np
 import pytest
 
 from optrack.errors import UserError
-from optrack.sim import Simulation
+from optrack.sim import Simulation, load_scenario
 from optrack.sim.body import JOINTS, BodyShape
 from optrack.sim.bvh import BVH_TO_WORLD, map_joints, read_bvh
 from optrack.sim.mocap import Performance, retarget
@@ -183,3 +184,25 @@ def test_the_same_seed_gives_the_same_performance(shared_data):
         assert a == second.truth(second.snapshot(t), visibility=False)
     other = Simulation("mocap", seed=8, people=2, seconds=3.0, clips=[clip, "wave"])
     assert other.truth(other.snapshot(2.9), visibility=False) != a
+
+
+def test_a_runner_stays_in_a_small_area_at_the_clips_pace(shared_data):
+    """Placed in a 2.4 m square (the skeleton bench's, where three sensors see), the run
+    (3.5 m/s at most, 1.43 s a play) turns at legs of its plays to stay inside, and its
+    hips never go faster than the clip's own."""
+    scenario = load_scenario("mocap")
+    area = (-1.2, -1.2, 1.2, 1.2)
+    scenario = msgspec.structs.replace(
+        scenario, people=msgspec.structs.replace(scenario.people, area=area)
+    )
+    clip = str(shared_data / "mocap" / "cmu_02_03_run.bvh")
+    sim = Simulation(scenario, people=1, sensors=3, seconds=4.0, clips=[clip], seed=1)
+    performer = sim.crowd.people[0].behaviour
+    assert performer.legs >= 2 and performer.leg < 0.8  # a play has legs that can turn
+    rate = 120.0
+    hips = performer.path(np.arange(0.0, 4.0, 1 / rate))
+    assert np.all(np.abs(hips) <= 1.2 + 0.05)
+    speed = np.linalg.norm(np.diff(hips, axis=0), axis=1) * rate
+    own = np.linalg.norm(np.diff(performer.motion.hips[:, :2], axis=0), axis=1)
+    assert speed.max() <= own.max() / performer.motion.frame_time * performer.scale * 1.01
+    assert speed.sum() / rate > 8.0  # it ran all the time, turning

@@ -68,6 +68,10 @@ def test_rendered_depth_of_a_mocap_person_lands_on_its_joints(shared_data, tmp_p
             _segment_distance(points, joints[PARENT[j]], joints[j]) for j in SKELETON_JOINTS[1:]
         ]
         nearest = np.min(bones, axis=0)
+        # The feet reach past the ankle, the last joint (up to 0.2 m to the toes): their
+        # points are checked against their own part below.
+        feet = np.isin(parts, [PART_NAMES.index("left_foot"), PART_NAMES.index("right_foot")])
+        nearest = nearest[~feet]
         assert np.percentile(nearest, 99) < 0.16 and np.median(nearest) < 0.08
         # Each labelled pixel lies on its own part, within that person's radii of it.
         shape = state.shapes[0]

@@ -78,7 +78,9 @@ def test_a_limb_without_support_diffuses_wider():
     assert np.array_equal(filt._widened(spread, "torso"), spread)
 
 
-def _raise_the_arm(lost_support: float, research_s: float = 0.0, check_s: float = 0.0) -> float:
+def _raise_the_arm(
+    lost_support: float, research_s: float = 0.0, check_s: float = 0.0, margin: float = 0.2
+) -> float:
     """Left wrist error (m) after a tracked person's left arm jumps overhead in one frame
     (the fourth, 0.1 s after the skeleton started)."""
     rng = np.random.default_rng(7)
@@ -87,6 +89,7 @@ def _raise_the_arm(lost_support: float, research_s: float = 0.0, check_s: float 
             "limb_lost_support": lost_support,
             "limb_research_s": research_s,
             "limb_check_s": check_s,
+            "limb_research_margin": margin,
             "shape_seconds": 0.0,
             "particles": 1000,
         }
@@ -111,6 +114,31 @@ def test_a_lost_limb_is_searched_again():
 
 def test_limbs_are_searched_again_in_turn_after_initialisation():
     assert _raise_the_arm(0.0, research_s=1.0) < 0.08
+
+
+def test_a_limb_searched_again_moves_only_for_a_clear_gain_in_the_data():
+    """limb_research_margin: the arm raised overhead gains far more than the default
+    margin; no move gains 2 (the maximum), so with that margin the arm stays where it was."""
+    assert SKELETON_PARAMS.create().limb_research_margin == 0.2
+    assert _raise_the_arm(0.0, research_s=1.0, margin=2.0) > 0.2
+    assert _raise_the_arm(0.3, margin=2.0) > 0.2  # the lost limb's search too
+
+
+def test_a_found_limb_stays_through_the_searches_after_initialisation():
+    """A person standing still, tracked from the first frame: the search of each limb
+    again over the first second keeps every wrist and ankle where it is."""
+    rng = np.random.default_rng(11)
+    params = SKELETON_PARAMS.create({"shape_seconds": 0.0, "particles": 1000})
+    tracker = SkeletonTracker(params, SHAPE, seed=4)
+    truth = _pose(SHAPE)
+    markers = [JOINTS.index(m) for m in ("left_wrist", "right_wrist", "left_ankle", "right_ankle")]
+    true = forward_kinematics(truth, SHAPE)[0][markers]
+    worst = []
+    for k in range(30):
+        estimate = tracker.update(seen_cloud(truth, SHAPE, rng), k / 30)
+        if k >= 5:
+            worst.append(np.linalg.norm(estimate.joints[markers] - true, axis=1).max())
+    assert max(worst) < 0.1, worst
 
 
 def _misplaced_arm(check_s: float, seed: int = 9) -> float:
