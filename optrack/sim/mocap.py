@@ -67,6 +67,7 @@ LOOP_TURNS_DEG = (0, 45, -45, 90, -90, 135, -135, 180)
 GROUND_PERCENTILE = 90  # of per-frame lifts: frames standing on the floor, not jumping
 BODY_CLEARANCE = 0.3  # m kept between a performer's pelvis and walls or furniture
 SEPARATION = 0.7  # m kept between two performers' pelvises
+WALL_FIRST = 100.0  # a path too near a wall scores this far below any other
 
 
 @dataclasses.dataclass
@@ -414,9 +415,14 @@ def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _score(venue: Venue, area: np.ndarray, points: np.ndarray, others: list[np.ndarray]) -> float:
     """How far the path ``points`` (n, 2) stays inside ``area`` (x0, y0, x1, y1), clear
-    of the venue and of the others' paths at the same instants (negative: too close)."""
-    inside = np.minimum(points - area[:2], area[2:] - points).min()
-    score = min(float(inside), float(venue.clearance(points).min()) - BODY_CLEARANCE)
+    of the venue and of the others' paths at the same instants (negative: too close).
+    Walls and furniture come first: a path that comes too close to them scores below
+    every path that keeps clear of them (a runner boxed in by the others goes near them
+    rather than through a wall)."""
+    walls = float(venue.clearance(points).min()) - BODY_CLEARANCE
+    if walls < 0.0:
+        return walls - WALL_FIRST
+    score = min(walls, float(np.minimum(points - area[:2], area[2:] - points).min()))
     for other in others:
         score = min(score, float(np.linalg.norm(points - other, axis=1).min()) - SEPARATION)
     return score
@@ -460,17 +466,22 @@ class _Planner:
 
     def place(self, rng: np.random.Generator) -> None:
         performer = self.performer
+        # The leg playing at the scene's start (a performer who starts into the clip may
+        # start past its first legs): placed at the point drawn; the legs before it are
+        # never played (the same plan stands in for them).
+        first = int(self.loop_of[0])
         best, best_score = None, -math.inf
         for _ in range(PLACEMENT_TRIES):
             point = rng.uniform(self.area[:2], self.area[2:])
-            performer.loops = [_Loop(point, float(rng.uniform(-math.pi, math.pi)), 0.0)]
-            score = self.score(0)
+            plan = _Loop(point, float(rng.uniform(-math.pi, math.pi)), 0.0)
+            performer.loops = [plan] * (first + 1)
+            score = self.score(first)
             if score > best_score:
-                best, best_score = performer.loops[0], score
+                best, best_score = plan, score
             if score >= 0:
                 break
-        performer.loops = [best]
-        for loop in range(1, self.loop_of[-1] + 1):
+        performer.loops = [best] * (first + 1)
+        for loop in range(first + 1, self.loop_of[-1] + 1):
             scores = []
             for turn in self.turns:
                 scores.append(self.score_turn(turn, loop))

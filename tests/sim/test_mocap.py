@@ -14,7 +14,7 @@ from optrack.errors import UserError
 from optrack.sim import Simulation, load_scenario
 from optrack.sim.body import JOINTS, BodyShape
 from optrack.sim.bvh import BVH_TO_WORLD, map_joints, read_bvh
-from optrack.sim.mocap import Performance, retarget
+from optrack.sim.mocap import BODY_CLEARANCE, Performance, retarget
 
 BONES = (
     ("left_hip", "left_knee"),
@@ -206,3 +206,19 @@ def test_a_runner_stays_in_a_small_area_at_the_clips_pace(shared_data):
     own = np.linalg.norm(np.diff(performer.motion.hips[:, :2], axis=0), axis=1)
     assert speed.max() <= own.max() / performer.motion.frame_time * performer.scale * 1.01
     assert speed.sum() / rate > 8.0  # it ran all the time, turning
+
+
+def test_three_runners_keep_off_the_walls_and_near_their_area(shared_data):
+    """Three people running the same clip for 20 s (the second and third start into it,
+    past its first legs) in the mocap room: every hips path keeps BODY_CLEARANCE from the
+    walls and furniture, and stays within 0.3 m of the scenario's area."""
+    clip = str(shared_data / "mocap" / "cmu_02_03_run.bvh")
+    sim = Simulation("mocap", people=3, seconds=20.0, clips=[clip], seed=1)
+    area = np.asarray(load_scenario("mocap").people.area)
+    times = np.arange(0.0, 20.0, 0.05)
+    for person in sim.crowd.people:
+        hips = person.behaviour.path(times)
+        assert sim.venue.clearance(hips).min() >= BODY_CLEARANCE - 1e-6
+        outside = np.maximum(np.maximum(area[:2] - hips, hips - area[2:]), 0.0)
+        assert outside.max() < 0.3
+    assert max(p.behaviour.offset for p in sim.crowd.people) > sim.crowd.people[0].behaviour.leg
