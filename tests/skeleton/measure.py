@@ -3,7 +3,8 @@
 Run: ``.venv/bin/python -m tests.skeleton.measure [THREADS]`` (default 1, the
 parameter ``threads``). Prints, for 300 and 600 points, the wall and CPU time of one
 full-body likelihood of 2000 poses, and of one filter step with the default parameters.
-Until ``optrack bench skeleton`` exists, this is the command behind the figures.
+The synthetic-cloud timings of docs/skeleton.md come from it; ``optrack bench skeleton``
+measures the whole stage on real motion.
 """
 
 from __future__ import annotations
