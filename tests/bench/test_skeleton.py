@@ -65,7 +65,9 @@ def test_bench_skeleton_scores_every_clip_by_default(shared_data):
     assert len(all_clips()) >= 6 and "cmu_131_02_alt_naming.bvh" in all_clips()
 
 
-def test_bench_skeleton_refuses_an_unknown_clip_and_bad_counts(shared_data, capsys):
+def test_bench_skeleton_refuses_an_unknown_clip_bad_counts_and_a_bad_config(
+    shared_data, capsys, tmp_path
+):
     code = main(["bench", "skeleton", "--clips", "cmu_16_27_walk_turn_left,not_a_clip"])
     err = capsys.readouterr().err
     assert code == 1 and "not_a_clip.bvh" in err and "cmu_16_27_walk_turn_left.bvh" in err
@@ -73,6 +75,13 @@ def test_bench_skeleton_refuses_an_unknown_clip_and_bad_counts(shared_data, caps
     assert "--seeds must be at least 1" in capsys.readouterr().err
     assert main(["bench", "skeleton", "--seconds", "-1"]) == 1
     assert "--seconds must be positive" in capsys.readouterr().err
+    missing = tmp_path / "none.yaml"
+    assert main(["bench", "skeleton", "--config", str(missing)]) == 1
+    assert f"config file {missing} does not exist" in capsys.readouterr().err
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text("skeleton:\n  limb_research_margin: 9\n")
+    assert main(["bench", "skeleton", "--config", str(wrong)]) == 1
+    assert "limb_research_margin must be between 0 and 2" in capsys.readouterr().err
 
 
 def test_bench_skeleton_skips_without_its_clips():
