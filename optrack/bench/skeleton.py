@@ -128,16 +128,16 @@ def _recording(clips: list[Path], people: int, seconds: float, area: bool) -> Pa
 
 
 # A parameter file's values of the two stages, plain dicts (they cross to worker processes).
-Stages = tuple[dict[str, Any], dict[str, Any]] | None
+Stages = tuple[dict[str, Any], dict[str, Any]]
 
 
-def _run(path: Path, sensors: int, label: str, seed: int = 0, stages: Stages = None) -> SkeletonRun:
+def _run(path: Path, sensors: int, label: str, seed: int, stages: Stages) -> SkeletonRun:
     """The skeleton over the recording at ``path`` with its first ``sensors`` sensors;
-    ``stages``: the ``skeleton`` and ``skeleton_fusion`` values (None: the defaults)."""
+    ``stages``: the ``skeleton`` and ``skeleton_fusion`` values."""
     info(f"bench skeleton: {label}, {sensors} sensor(s), seed {seed}")
     recording = Recording(path)
     poses = {s: np.asarray(i.world_T_camera) for s, i in recording.sensors.items()}
-    skeleton, fusion = (None, None) if stages is None else _params(stages, None)
+    skeleton, fusion = _params(stages, None)
     return run_skeleton(
         recording, poses, recording.sensor_ids[:sensors], skeleton, fusion, seed=seed
     )
@@ -145,7 +145,7 @@ def _run(path: Path, sensors: int, label: str, seed: int = 0, stages: Stages = N
 
 def _params(stages: Stages, path: str | None) -> tuple[Params, Params]:
     """The ``skeleton`` and ``skeleton_fusion`` parameters of ``stages`` (checked)."""
-    skeleton, fusion = stages if stages is not None else ({}, {})
+    skeleton, fusion = stages
     return _create(SKELETON_PARAMS, skeleton, path), _create(FUSION_PARAMS, fusion, path)
 
 
@@ -154,33 +154,32 @@ def _accuracy(runs: dict[str, dict[str, list[SkeletonRun]]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for setting, _ in SETTINGS:
         per_clip = {clip: runs[clip][setting] for clip in runs}
+        # Each run scored once: its mean and its people's initialisation times.
+        means = {
+            c: [score_markers(r.errors)["mean_error_m"] for r in s] for c, s in per_clip.items()
+        }
+        times = {
+            clip: {
+                f"{seed}/{pid}": t
+                for seed, run in enumerate(seeded)
+                for pid, t in initialisation_times(run.errors, run.person_ids, run.stamps).items()
+            }
+            for clip, seeded in per_clip.items()
+        }
         every = [run for seeded in per_clip.values() for run in seeded]
         pooled = score_markers(np.concatenate([r.errors for r in every]))
-        means = [score_markers(r.errors)["mean_error_m"] for r in every]
         pooled["runs"] = len(every)
-        pooled["runs_over_0_10"] = sum(1 for m in means if m is None or m > 0.1)
-        times = {
-            f"{clip}/{seed}/{pid}": t
-            for clip, seeded in per_clip.items()
-            for seed, run in enumerate(seeded)
-            for pid, t in initialisation_times(run.errors, run.person_ids, run.stamps).items()
-        }
-        pooled["initialisation"] = score_initialisation(times)
+        pooled["runs_over_0_10"] = sum(
+            1 for clip in means for m in means[clip] if m is None or m > 0.1
+        )
+        pooled["initialisation"] = score_initialisation(
+            {f"{clip}/{key}": t for clip in times for key, t in times[clip].items()}
+        )
         pooled["clips"] = {}
         for clip, seeded in per_clip.items():
             figures = score_markers(np.concatenate([r.errors for r in seeded]))
-            figures["mean_error_m_by_seed"] = [
-                score_markers(r.errors)["mean_error_m"] for r in seeded
-            ]
-            figures["initialisation"] = score_initialisation(
-                {
-                    f"{seed}/{pid}": t
-                    for seed, run in enumerate(seeded)
-                    for pid, t in initialisation_times(
-                        run.errors, run.person_ids, run.stamps
-                    ).items()
-                }
-            )
+            figures["mean_error_m_by_seed"] = means[clip]
+            figures["initialisation"] = score_initialisation(times[clip])
             pooled["clips"][clip] = figures
         out[setting] = pooled
     return out
@@ -199,15 +198,18 @@ def _accuracy_runs(
     runs: dict[str, dict[str, list[SkeletonRun]]] = {
         clip: {setting: [] for setting, _ in SETTINGS} for clip in recordings
     }
+    # Each run's progress line says which of them it is: "run 5 of 108: CLIP".
+    labels = [f"run {k + 1} of {len(tasks)}: {clip}" for k, (clip, *_) in enumerate(tasks)]
+    work = [
+        (recordings[c], n, label, seed, stages)
+        for (c, _, n, seed), label in zip(tasks, labels, strict=True)
+    ]
     if jobs <= 1:
-        done = [_run(recordings[c], n, c, seed, stages) for c, _, n, seed in tasks]
+        done = [_run(*args) for args in work]
     else:
         context = multiprocessing.get_context("spawn")  # numba and threads: no fork
         with ProcessPoolExecutor(jobs, mp_context=context) as pool:
-            futures = [
-                pool.submit(_run, recordings[c], n, c, seed, stages) for c, _, n, seed in tasks
-            ]
-            done = [f.result() for f in futures]
+            done = [f.result() for f in [pool.submit(_run, *args) for args in work]]
     for (clip, setting, _, _), run in zip(tasks, done, strict=True):
         runs[clip][setting].append(run)
     return runs
