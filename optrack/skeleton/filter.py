@@ -71,6 +71,9 @@ _YAW = 3
 # turns (persistent); not the pelvis's height, which bobs (gait, jumps, squats).
 _MOVING = [0, 1, _YAW]
 _STILL = np.array([0.3, 0.3, 1.0])  # m/s, m/s, rad/s of velocity that momentum ignores
+# The limbs' angles (both arms and both legs), whose velocity limb_momentum carries on
+# (whole: a threshold like the root's, 2.5 rad/s, did worse on the bench, docs/skeleton.md).
+_LIMBS = slice(12, D)
 
 
 def motion_spread(params: Params, dt: float) -> np.ndarray:
@@ -213,6 +216,8 @@ class SkeletonFilter:
         self._reach = {name: part_reach(shape, PARTITION_PARTS[name]) for name in _ROOT_JOINT}
         # The root's velocity (x, y in m/s, heading in rad/s), smoothed over frames.
         self.velocity = np.zeros(len(_MOVING))
+        # The limbs' angular velocity (rad/s), smoothed over frames.
+        self.limb_velocity = np.zeros(D - _LIMBS.start)
         # Each area's support at the estimate's last fit (K, 2); None before one.
         self.support: np.ndarray | None = None
 
@@ -222,6 +227,11 @@ class SkeletonFilter:
         self.estimate = np.asarray(state, dtype=np.float64).copy()
         noise = self.rng.normal(size=(n, D)) * np.broadcast_to(spread, (D,))
         self.particles = _clamp(self.estimate[None, :] + noise)
+        self.limb_velocity[:] = 0.0  # a new pose: its limbs' motion is unknown
+
+    def stop_limb(self, dims: list[int]) -> None:
+        """Forget the angular velocity of the limb numbers ``dims`` (a limb found anew)."""
+        self.limb_velocity[np.asarray(dims) - _LIMBS.start] = 0.0
 
     def expected_support(self, n_points: int) -> np.ndarray:
         """Points each area of interest should hold, (K, 2)."""
@@ -241,6 +251,7 @@ class SkeletonFilter:
         # 0.5 rad/s, and carrying that over would feed it back (the heading drifts).
         carried = np.sign(self.velocity) * np.maximum(np.abs(self.velocity) - _STILL, 0.0)
         drift[_MOVING] = carried * dt * float(self.params.momentum)
+        drift[_LIMBS] = self.limb_velocity * dt * float(self.params.limb_momentum)
         noise = self.rng.standard_normal(self.particles.shape)
         noise *= step
         moved = self.particles + drift
@@ -253,6 +264,8 @@ class SkeletonFilter:
             moved = self.estimate[_MOVING] - before[_MOVING]
             moved[-1] = np.angle(np.exp(1j * moved[-1]))
             self.velocity = 0.5 * self.velocity + 0.5 * moved / dt
+            turned = (self.estimate[_LIMBS] - before[_LIMBS]) / dt
+            self.limb_velocity = 0.5 * self.limb_velocity + 0.5 * turned
         return self.estimate.copy()
 
     def _widened(self, spread: np.ndarray, partition: str) -> np.ndarray:

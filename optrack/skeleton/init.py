@@ -205,6 +205,8 @@ def search_limb_again(
     moved = after > score and (margin is None or after_data > data + margin)
     if not moved:
         filt.estimate = before
+    else:
+        filt.stop_limb(dims)
     filt.particles[:, dims] = filt.estimate[dims]
     return moved
 

@@ -213,6 +213,16 @@ SKELETON_PARAMS = register(
                 "frames) the particles move by before the random walk (0: a pure random walk).",
             ),
             Param(
+                "limb_momentum",
+                0.0,
+                min=0.0,
+                max=1.0,
+                step=0.05,
+                help="Share of each limb angle's last velocity (smoothed over frames) the "
+                "particles move by before the random walk (0: the limbs walk at random). "
+                "Off by default: with three sensors it helps a little, with two it costs.",
+            ),
+            Param(
                 "limb_search",
                 0.0,
                 min=0.0,

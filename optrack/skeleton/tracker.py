@@ -280,10 +280,10 @@ class SkeletonTracker:
         self.shape, self.shape_estimated = self._search.shape, True
         self._search = None
         pose = self.filter.estimate.copy()
-        velocity = self.filter.velocity
+        velocity, limbs = self.filter.velocity, self.filter.limb_velocity
         self.filter = SkeletonFilter(self.shape, self.params, self._seed)
         self.filter.reset(pose)
-        self.filter.velocity = velocity
+        self.filter.velocity, self.filter.limb_velocity = velocity, limbs
 
     def _start(self, points: np.ndarray) -> None:
         if self.shape is None:

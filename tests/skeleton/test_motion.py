@@ -9,7 +9,7 @@ import numpy as np
 
 from optrack.skeleton.filter import SkeletonFilter, motion_spread
 from optrack.skeleton.joints import JOINTS
-from optrack.skeleton.model import PARTITIONS, BodyShape, forward_kinematics, rest_state
+from optrack.skeleton.model import DOFS, PARTITIONS, BodyShape, forward_kinematics, rest_state
 from optrack.skeleton.params import SKELETON_PARAMS
 from optrack.skeleton.tracker import SkeletonTracker
 from tests.skeleton.clouds import seen_cloud
@@ -194,3 +194,63 @@ def _walk_backwards_start(facing_speed: float) -> float:
 def test_a_skeleton_facing_backwards_turns_to_face_the_motion():
     assert _walk_backwards_start(0.5) < 0.5
     assert _walk_backwards_start(0.0) > 2.0  # without it, it walks on backwards
+
+
+SWING_HZ = 2.5  # a fast swing of each leg and arm, back and forth (a kick, a sprint)
+SWING_RAD = 0.8  # amplitude: peak angular speed 2 pi 2.5 0.8 = 12.6 rad/s, 0.42 rad a frame
+
+
+def _swing(limb_momentum: float, seed: int) -> tuple[float, np.ndarray]:
+    """Mean error (m) of the wrists and ankles over the last two thirds of a swing of both
+    hips and shoulders (opposite phases, the person in place), tracked from the first
+    frame's true pose; and the filter's last limb velocity."""
+    rng = np.random.default_rng(seed)
+    start = _pose(SHAPE)
+    params = SKELETON_PARAMS.create({"limb_momentum": limb_momentum})
+    filt = SkeletonFilter(SHAPE, params, seed=seed)
+    filt.reset(start)
+    flex = [
+        DOFS.index(f"{side}_{joint}_flex")
+        for side in ("left", "right")
+        for joint in ("hip", "shoulder")
+    ]
+    phase = np.array([0.0, np.pi, np.pi, 0.0])  # left hip with the right shoulder
+    ends = [JOINTS.index(j) for j in ("left_wrist", "right_wrist", "left_ankle", "right_ankle")]
+    errors, frames = [], 30
+    for k in range(1, frames):
+        truth = start.copy()
+        truth[flex] = 0.5 + SWING_RAD * np.sin(2 * np.pi * SWING_HZ * k / 30 + phase)
+        estimate = filt.step(seen_cloud(truth, SHAPE, rng), 1 / 30)
+        if k >= frames // 3:
+            found = forward_kinematics(estimate, SHAPE)[0][ends]
+            true = forward_kinematics(truth, SHAPE)[0][ends]
+            errors.append(np.linalg.norm(found - true, axis=1).mean())
+    return float(np.mean(errors)), filt.limb_velocity
+
+
+def test_limb_momentum_follows_a_fast_swing():
+    carried = [_swing(0.5, seed)[0] for seed in range(3)]
+    still = [_swing(0.0, seed)[0] for seed in range(3)]
+    # The random walk's step (agility 4 rad/s: 0.13 rad a frame) falls behind the swing.
+    assert np.mean(carried) < 0.8 * np.mean(still), (carried, still)
+    assert np.mean(carried) < 0.05, carried
+
+
+def test_limb_velocity_is_each_angles_rate_and_a_new_pose_forgets_it():
+    rng = np.random.default_rng(7)
+    start = _pose(SHAPE)
+    filt = SkeletonFilter(SHAPE, SKELETON_PARAMS.create({"limb_momentum": 0.5}), seed=3)
+    filt.reset(start)
+    hips = [DOFS.index("left_hip_flex"), DOFS.index("right_hip_flex")]
+    rate = np.array([3.0, -2.0])  # rad/s: one thigh forward, the other back
+    for k in range(1, 16):
+        truth = start.copy()
+        truth[hips] = 0.4 + rate * k / 30
+        filt.step(seen_cloud(truth, SHAPE, rng), 1 / 30)
+    measured = filt.limb_velocity[np.array(hips) - 12]
+    assert np.allclose(measured, rate, atol=1.0), measured
+    filt.limb_velocity[:] = 1.0
+    filt.stop_limb(list(PARTITIONS["left_leg"]))
+    assert np.all(filt.limb_velocity[8:12] == 0.0) and np.all(filt.limb_velocity[:8] == 1.0)
+    filt.reset(start)
+    assert np.all(filt.limb_velocity == 0.0)
