@@ -16,6 +16,7 @@ and the knees, which bend one way only, tell front from back).
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import least_squares
 
 from optrack.skeleton.filter import SkeletonFilter, motion_spread
 from optrack.skeleton.likelihood import log_likelihood
@@ -23,6 +24,7 @@ from optrack.skeleton.model import (
     LIMITS,
     PARTITIONS,
     PARTS,
+    POINTS,
     BodyShape,
     D,
     forward_kinematics,
@@ -41,6 +43,7 @@ __all__ = [
     "pose_log_likelihood",
     "search_limb",
     "search_limb_again",
+    "swap_legs",
 ]
 
 LIMBS = ("left_arm", "right_arm", "left_leg", "right_leg")
@@ -79,6 +82,11 @@ _REST = {
 # Coarse searches of each limb at initialisation (one alone sometimes settles on a wrong
 # fold of the arm, and the heading it completes then loses to the wrong one).
 _LIMB_TRIES = 2
+# swap_legs: how far (m) the left knee may be to the left of the right one, along the hips'
+# line, for the legs to be tried the other way round. Legs found crossed on the run clip
+# with two sensors: -0.25 to +0.05 m; found right: -0.03 to +0.41 m, crossed at the knees
+# only as they pass each other.
+_KNEES_APART = 0.05
 # Points higher than this share of the height are the chest and shoulders.
 _CHEST_BAND = (0.62, 0.8)
 
@@ -209,6 +217,62 @@ def search_limb_again(
         filt.stop_limb(dims)
     filt.particles[:, dims] = filt.estimate[dims]
     return moved
+
+
+def swap_legs(filt: SkeletonFilter, points: np.ndarray, margin: float) -> bool:
+    """Legs found the wrong way round: where the feet are close to the body's middle (a
+    runner mid-stride seen by two sensors) a left leg on the right leg's points and a right
+    leg on the left's, both thighs crossed, explain the cloud about as well as the true
+    legs, and tracking does not undo it (each leg holds the points the other would take).
+    Try the exchange: each leg bent (least squares on its four angles, within their limits)
+    to put its knee and ankle where the other's are, both legs then annealed as a frame
+    would; kept where the data's likelihood (without the arms' prior) rises by more than
+    ``margin`` and the whole body's rises. Tried only where the knees are crossed or about
+    level (the left knee less than ``_KNEES_APART`` to the left of the right one, along the
+    hips' line): legs the right way round but crossed at the knees are rare. Returns
+    whether the legs were exchanged."""
+    before = filt.estimate.copy()
+    joints = forward_kinematics(before, filt.shape)[0]
+    hips = joints[POINTS.index("left_hip")] - joints[POINTS.index("right_hip")]
+    knees = joints[POINTS.index("left_knee")] - joints[POINTS.index("right_knee")]
+    if knees @ hips / max(float(np.linalg.norm(hips)), 1e-9) > _KNEES_APART:
+        return False
+    kept, motion = filt.particles.copy(), filt.limb_velocity.copy()
+    score, data = _scores(filt, points, before)
+    swapped = before.copy()
+    for leg, other in (("left", "right"), ("right", "left")):
+        dims = list(PARTITIONS[f"{leg}_leg"])
+        own = [POINTS.index(f"{leg}_knee"), POINTS.index(f"{leg}_ankle")]
+        targets = joints[[POINTS.index(f"{other}_knee"), POINTS.index(f"{other}_ankle")]]
+        swapped[dims] = _reach(filt.shape, before, dims, own, targets)
+    filt.estimate = swapped
+    fine = motion_spread(filt.params, _FINE_DT)
+    filt.reset(swapped, fine)
+    for leg in ("left_leg", "right_leg"):
+        filt.anneal(points, leg, int(filt.params.layers), fine)
+    after, after_data = _scores(filt, points, filt.estimate)
+    if after > score and after_data > data + margin:
+        return True
+    filt.estimate, filt.particles, filt.limb_velocity = before, kept, motion
+    return False
+
+
+def _reach(
+    shape: BodyShape, state: np.ndarray, dims: list[int], own: list[int], targets: np.ndarray
+) -> np.ndarray:
+    """The angles ``dims`` of ``state`` (a leg's) that bring its points ``own`` nearest
+    ``targets`` (metres, least squares), from the other leg's angles (the mirror image)."""
+    low, high = LIMITS[dims, 0], LIMITS[dims, 1]
+    other = [d + 4 if d + 4 < D else d - 4 for d in dims]  # the other leg's same angles
+
+    def residual(angles: np.ndarray) -> np.ndarray:
+        trial = state.copy()
+        trial[dims] = angles
+        return (forward_kinematics(trial, shape)[0][own] - targets).ravel()
+
+    start = np.clip(state[other], low + 1e-6, high - 1e-6)
+    # The kinematics run in float32: finite differences need a step well above its rounding.
+    return least_squares(residual, start, bounds=(low, high), diff_step=1e-3, xtol=1e-4).x
 
 
 def _scores(filt: SkeletonFilter, points: np.ndarray, state: np.ndarray) -> tuple[float, float]:

@@ -7,7 +7,8 @@ joints of optrack/skeleton/joints.py, a confidence per joint, and a state:
 - ``initialising``: no pose yet, or one that explains less than
   ``track_fraction`` of the cloud; the first frame runs the coarse-to-fine
   search (optrack/skeleton/init.py), the next ones refine it as tracking does
-  and, for ``limb_research_s``, search one limb again a frame, in turn;
+  and, for ``limb_research_s``, search one limb again a frame, in turn (after both
+  legs, the legs are also tried the other way round: init.py's ``swap_legs``);
 - ``tracking``: the estimate explains at least ``track_fraction``; with
   ``limb_check_s`` (off by default) each limb, in turn, is checked about that often by
   a short search again, kept only where the whole body explains the cloud better (a
@@ -49,6 +50,7 @@ from optrack.skeleton.init import (
     initialise_facing,
     pose_log_likelihood,
     search_limb_again,
+    swap_legs,
 )
 from optrack.skeleton.joints import JOINTS
 from optrack.skeleton.model import PARTS, BodyShape, forward_kinematics
@@ -211,7 +213,9 @@ class SkeletonTracker:
         tracking, one limb in turn each ``limb_check_s`` / 4 s, by a shorter search. A new
         pose is kept where the whole body's likelihood rose and the data's (without the
         arms' prior) by more than ``limb_research_margin`` (the check's: ``_CHECK_MARGIN``).
-        Returns whether a limb moved."""
+        In the first ``limb_research_s``, once the right leg (the last limb) has been
+        searched again, the legs are also tried the other way round (``swap_legs``, the
+        same margin). Returns whether a limb moved."""
         chosen = []
         if stamp - self._started < float(self.params.limb_research_s):
             chosen.append(LIMBS[self._turn % len(LIMBS)])
@@ -230,6 +234,12 @@ class SkeletonTracker:
         margin = float(self.params.limb_research_margin)
         for limb in chosen:
             moved |= search_limb_again(self.filter, points, limb, share, None, margin)
+        if (
+            chosen
+            and chosen[0] == "right_leg"
+            and stamp - self._started < float(self.params.limb_research_s)
+        ):  # both legs searched again: are they the wrong way round?
+            moved |= swap_legs(self.filter, points, margin)
         check = self._limb_to_check(stamp, chosen)
         if check is not None:
             particles = min(_CHECK_PARTICLES, len(self.filter.particles))

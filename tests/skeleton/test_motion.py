@@ -9,8 +9,16 @@ from __future__ import annotations
 import numpy as np
 
 from optrack.skeleton.filter import SkeletonFilter, motion_spread
+from optrack.skeleton.init import _reach, swap_legs
 from optrack.skeleton.joints import JOINTS
-from optrack.skeleton.model import DOFS, PARTITIONS, BodyShape, forward_kinematics, rest_state
+from optrack.skeleton.model import (
+    DOFS,
+    PARTITIONS,
+    POINTS,
+    BodyShape,
+    forward_kinematics,
+    rest_state,
+)
 from optrack.skeleton.params import SKELETON_PARAMS
 from optrack.skeleton.tracker import SkeletonTracker
 from tests.skeleton.clouds import seen_cloud
@@ -255,3 +263,48 @@ def test_limb_velocity_is_each_angles_rate_and_a_new_pose_forgets_it():
     assert np.all(filt.limb_velocity[8:12] == 0.0) and np.all(filt.limb_velocity[:8] == 1.0)
     filt.reset(start)
     assert np.all(filt.limb_velocity == 0.0)
+
+
+def _stride() -> np.ndarray:
+    """Mid-stride: the left thigh forward, the right back with its knee bent."""
+    truth = rest_state(SHAPE, 0.5, 0.2, 0.4)
+    left, right = list(PARTITIONS["left_leg"]), list(PARTITIONS["right_leg"])
+    truth[left] = [0.6, 0.0, 0.0, 0.3]
+    truth[right] = [-0.3, 0.0, 0.0, 1.2]
+    return truth
+
+
+def test_legs_the_wrong_way_round_are_exchanged_and_right_ones_kept():
+    rng = np.random.default_rng(11)
+    truth = _stride()
+    cloud = seen_cloud(truth, SHAPE, rng, sensors=2)
+    ankles = [JOINTS.index("left_ankle"), JOINTS.index("right_ankle")]
+    true_ankles = forward_kinematics(truth, SHAPE)[0][ankles]
+    # The wrong way round: each leg bent to the other's knee and ankle (legs crossed).
+    joints = forward_kinematics(truth, SHAPE)[0]
+    crossed = truth.copy()
+    for leg, other in (("left", "right"), ("right", "left")):
+        own = [POINTS.index(f"{leg}_knee"), POINTS.index(f"{leg}_ankle")]
+        targets = joints[[POINTS.index(f"{other}_knee"), POINTS.index(f"{other}_ankle")]]
+        crossed[list(PARTITIONS[f"{leg}_leg"])] = _reach(
+            SHAPE, truth, list(PARTITIONS[f"{leg}_leg"]), own, targets
+        )
+    wrong = forward_kinematics(crossed, SHAPE)[0][ankles]
+    assert np.all(np.linalg.norm(wrong - true_ankles, axis=1) > 0.3)  # the left at the right
+    assert np.all(np.linalg.norm(wrong - true_ankles[::-1], axis=1) < 0.05)
+    filt = SkeletonFilter(SHAPE, SKELETON_PARAMS.create(), seed=4)
+    filt.reset(crossed)
+    assert swap_legs(filt, cloud, 0.2)
+    found = forward_kinematics(filt.estimate, SHAPE)[0][ankles]
+    assert np.all(np.linalg.norm(found - true_ankles, axis=1) < 0.08), found - true_ankles
+    # Legs the right way round stay as they are, particles and all: apart (not tried) and
+    # with the knees close, as a runner's pass (tried, and the exchange scores worse).
+    close = truth.copy()
+    close[[DOFS.index("left_hip_abduction"), DOFS.index("right_hip_abduction")]] = -0.2
+    for right in (truth, close):
+        cloud = seen_cloud(right, SHAPE, rng, sensors=2)
+        filt.reset(right)
+        before, particles = filt.estimate.copy(), filt.particles.copy()
+        assert not swap_legs(filt, cloud, 0.2)
+        assert np.array_equal(filt.estimate, before)
+        assert np.array_equal(filt.particles, particles)
