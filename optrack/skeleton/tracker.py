@@ -8,7 +8,8 @@ joints of optrack/skeleton/joints.py, a confidence per joint, and a state:
   ``track_fraction`` of the cloud; the first frame runs the coarse-to-fine
   search (optrack/skeleton/init.py), the next ones refine it as tracking does
   and, for ``limb_research_s``, search one limb again a frame, in turn (after both
-  legs, the legs are also tried the other way round: init.py's ``swap_legs``);
+  legs, the legs are also tried the other way round: init.py's ``swap_legs``, which
+  tracking also tries every fourth update);
 - ``tracking``: the estimate explains at least ``track_fraction``; with
   ``limb_check_s`` (off by default) each limb, in turn, is checked about that often by
   a short search again, kept only where the whole body explains the cloud better (a
@@ -102,6 +103,9 @@ _CHECK_LAYERS = 6
 # The walk's arm found again gained 0.28 in the data; moves of a limb already found gained
 # 0-0.09 (walk, squat).
 _CHECK_MARGIN = 0.1
+# While tracking, the legs are tried the other way round (swap_legs) every this many
+# updates: each try where the knees are crossed or close costs 10-14 ms of CPU.
+_SWAP_EVERY = 4
 # The parts whose support tells whether a limb is lost: its bones (the feet, cut by the
 # fusion's floor margin, hold few points even when found).
 _LIMB_PARTS = {
@@ -140,6 +144,7 @@ class SkeletonTracker:
         self._stamp: float | None = None
         self._started = -np.inf  # when the skeleton last initialised
         self._turn = 0  # the next limb searched again after initialisation
+        self._updates = 0  # updates with a pose (swap_legs's turn)
         self._checked = -np.inf  # when a limb was last checked while tracking
         self._backwards = 0  # frames in a row moving against where the pelvis faces
         self._misses = 0
@@ -213,9 +218,10 @@ class SkeletonTracker:
         tracking, one limb in turn each ``limb_check_s`` / 4 s, by a shorter search. A new
         pose is kept where the whole body's likelihood rose and the data's (without the
         arms' prior) by more than ``limb_research_margin`` (the check's: ``_CHECK_MARGIN``).
-        In the first ``limb_research_s``, once the right leg (the last limb) has been
-        searched again, the legs are also tried the other way round (``swap_legs``, the
-        same margin). Returns whether a limb moved."""
+        The legs are also tried the other way round (``swap_legs``, the same margin; only
+        where the knees are crossed or close): in the first ``limb_research_s`` once the
+        right leg (the last limb) has been searched again, and while tracking every
+        ``_SWAP_EVERY`` updates. Returns whether a limb moved."""
         chosen = []
         if stamp - self._started < float(self.params.limb_research_s):
             chosen.append(LIMBS[self._turn % len(LIMBS)])
@@ -234,11 +240,12 @@ class SkeletonTracker:
         margin = float(self.params.limb_research_margin)
         for limb in chosen:
             moved |= search_limb_again(self.filter, points, limb, share, None, margin)
+        self._updates += 1
         if (
             chosen
             and chosen[0] == "right_leg"
             and stamp - self._started < float(self.params.limb_research_s)
-        ):  # both legs searched again: are they the wrong way round?
+        ) or (self.state == "tracking" and self._updates % _SWAP_EVERY == 0):
             moved |= swap_legs(self.filter, points, margin)
         check = self._limb_to_check(stamp, chosen)
         if check is not None:

@@ -274,21 +274,25 @@ def _stride() -> np.ndarray:
     return truth
 
 
+def _crossed(truth: np.ndarray) -> np.ndarray:
+    """The legs the wrong way round: each bent to the other's knee and ankle (crossed)."""
+    joints = forward_kinematics(truth, SHAPE)[0]
+    crossed = truth.copy()
+    for leg, other in (("left", "right"), ("right", "left")):
+        dims = list(PARTITIONS[f"{leg}_leg"])
+        own = [POINTS.index(f"{leg}_knee"), POINTS.index(f"{leg}_ankle")]
+        targets = joints[[POINTS.index(f"{other}_knee"), POINTS.index(f"{other}_ankle")]]
+        crossed[dims] = _reach(SHAPE, truth, dims, own, targets)
+    return crossed
+
+
 def test_legs_the_wrong_way_round_are_exchanged_and_right_ones_kept():
     rng = np.random.default_rng(11)
     truth = _stride()
     cloud = seen_cloud(truth, SHAPE, rng, sensors=2)
     ankles = [JOINTS.index("left_ankle"), JOINTS.index("right_ankle")]
     true_ankles = forward_kinematics(truth, SHAPE)[0][ankles]
-    # The wrong way round: each leg bent to the other's knee and ankle (legs crossed).
-    joints = forward_kinematics(truth, SHAPE)[0]
-    crossed = truth.copy()
-    for leg, other in (("left", "right"), ("right", "left")):
-        own = [POINTS.index(f"{leg}_knee"), POINTS.index(f"{leg}_ankle")]
-        targets = joints[[POINTS.index(f"{other}_knee"), POINTS.index(f"{other}_ankle")]]
-        crossed[list(PARTITIONS[f"{leg}_leg"])] = _reach(
-            SHAPE, truth, list(PARTITIONS[f"{leg}_leg"]), own, targets
-        )
+    crossed = _crossed(truth)
     wrong = forward_kinematics(crossed, SHAPE)[0][ankles]
     assert np.all(np.linalg.norm(wrong - true_ankles, axis=1) > 0.3)  # the left at the right
     assert np.all(np.linalg.norm(wrong - true_ankles[::-1], axis=1) < 0.05)
@@ -308,3 +312,22 @@ def test_legs_the_wrong_way_round_are_exchanged_and_right_ones_kept():
         assert not swap_legs(filt, cloud, 0.2)
         assert np.array_equal(filt.estimate, before)
         assert np.array_equal(filt.particles, particles)
+
+
+def test_tracking_exchanges_legs_found_the_wrong_way_round():
+    rng = np.random.default_rng(12)
+    truth = _stride()
+    ankles = [JOINTS.index("left_ankle"), JOINTS.index("right_ankle")]
+    true_ankles = forward_kinematics(truth, SHAPE)[0][ankles]
+    crossed = _crossed(truth)
+    # No search again after the start: only tracking's own tries of the exchange.
+    params = SKELETON_PARAMS.create({"limb_research_s": 0.0})
+    tracker = SkeletonTracker(params, shape=SHAPE, seed=5)
+    tracker.update(seen_cloud(truth, SHAPE, rng, sensors=2), 0.0)
+    tracker.filter.reset(crossed)  # as if the legs had been found the wrong way round
+    found = None
+    for k in range(1, 9):
+        found = tracker.update(seen_cloud(truth, SHAPE, rng, sensors=2), k / 30)
+    assert tracker.state == "tracking"
+    errors = np.linalg.norm(found.joints[ankles] - true_ankles, axis=1)
+    assert np.all(errors < 0.08), errors
