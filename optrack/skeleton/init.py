@@ -245,9 +245,8 @@ def swap_legs(filt: SkeletonFilter, points: np.ndarray, margin: float) -> bool:
         own = [POINTS.index(f"{leg}_knee"), POINTS.index(f"{leg}_ankle")]
         targets = joints[[POINTS.index(f"{other}_knee"), POINTS.index(f"{other}_ankle")]]
         swapped[dims] = _reach(filt.shape, before, dims, own, targets)
-    filt.estimate = swapped
     fine = motion_spread(filt.params, _FINE_DT)
-    filt.reset(swapped, fine)
+    filt.reset(swapped, fine)  # every particle near the exchange, as a frame would start
     for leg in ("left_leg", "right_leg"):
         filt.anneal(points, leg, int(filt.params.layers), fine)
     after, after_data = _scores(filt, points, filt.estimate)
