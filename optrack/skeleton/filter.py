@@ -73,7 +73,7 @@ _MOVING = [0, 1, _YAW]
 _STILL = np.array([0.3, 0.3, 1.0])  # m/s, m/s, rad/s of velocity that momentum ignores
 # The limbs' angles (both arms and both legs), whose velocity limb_momentum carries on
 # (whole: a threshold like the root's, 2.5 rad/s, did worse on the bench, docs/skeleton.md).
-_LIMBS = slice(12, D)
+_LIMBS = slice(PARTITIONS["left_arm"][0], D)
 
 
 def motion_spread(params: Params, dt: float) -> np.ndarray:

@@ -204,13 +204,12 @@ def search_limb_again(
     Returns whether the limb moved."""
     dims = list(PARTITIONS[limb])
     before, kept = filt.estimate.copy(), filt.particles
-    score, data = _scores(filt, points, before)
+    scores = _scores(filt, points, before)
     if particles is not None:
         filt.particles = kept[:particles].copy()
     search_limb(filt, points, limb, layers)
     filt.particles = kept
-    after, after_data = _scores(filt, points, filt.estimate)
-    moved = after > score and (margin is None or after_data > data + margin)
+    moved = _better(scores, _scores(filt, points, filt.estimate), margin)
     if not moved:
         filt.estimate = before
     else:
@@ -238,40 +237,51 @@ def swap_legs(filt: SkeletonFilter, points: np.ndarray, margin: float) -> bool:
     if knees @ hips / max(float(np.linalg.norm(hips)), 1e-9) > _KNEES_APART:
         return False
     kept, motion = filt.particles.copy(), filt.limb_velocity.copy()
-    score, data = _scores(filt, points, before)
+    scores = _scores(filt, points, before)
     swapped = before.copy()
     for leg, other in (("left", "right"), ("right", "left")):
         dims = list(PARTITIONS[f"{leg}_leg"])
         own = [POINTS.index(f"{leg}_knee"), POINTS.index(f"{leg}_ankle")]
         targets = joints[[POINTS.index(f"{other}_knee"), POINTS.index(f"{other}_ankle")]]
-        swapped[dims] = _reach(filt.shape, before, dims, own, targets)
+        start = before[list(PARTITIONS[f"{other}_leg"])]  # the mirror image
+        swapped[dims] = _reach(filt.shape, before, dims, own, targets, start)
     fine = motion_spread(filt.params, _FINE_DT)
     filt.reset(swapped, fine)  # every particle near the exchange, as a frame would start
     for leg in ("left_leg", "right_leg"):
         filt.anneal(points, leg, int(filt.params.layers), fine)
-    after, after_data = _scores(filt, points, filt.estimate)
-    if after > score and after_data > data + margin:
+    if _better(scores, _scores(filt, points, filt.estimate), margin):
         return True
     filt.estimate, filt.particles, filt.limb_velocity = before, kept, motion
     return False
 
 
 def _reach(
-    shape: BodyShape, state: np.ndarray, dims: list[int], own: list[int], targets: np.ndarray
+    shape: BodyShape,
+    state: np.ndarray,
+    dims: list[int],
+    own: list[int],
+    targets: np.ndarray,
+    start: np.ndarray,
 ) -> np.ndarray:
-    """The angles ``dims`` of ``state`` (a leg's) that bring its points ``own`` nearest
-    ``targets`` (metres, least squares), from the other leg's angles (the mirror image)."""
+    """The angles ``dims`` of ``state`` that bring its points ``own`` nearest ``targets``
+    (metres, least squares, within the angles' limits), from the angles ``start``."""
     low, high = LIMITS[dims, 0], LIMITS[dims, 1]
-    other = [d + 4 if d + 4 < D else d - 4 for d in dims]  # the other leg's same angles
 
     def residual(angles: np.ndarray) -> np.ndarray:
         trial = state.copy()
         trial[dims] = angles
         return (forward_kinematics(trial, shape)[0][own] - targets).ravel()
 
-    start = np.clip(state[other], low + 1e-6, high - 1e-6)
+    start = np.clip(start, low + 1e-6, high - 1e-6)
     # The kinematics run in float32: finite differences need a step well above its rounding.
     return least_squares(residual, start, bounds=(low, high), diff_step=1e-3, xtol=1e-4).x
+
+
+def _better(before: tuple[float, float], after: tuple[float, float], margin: float | None) -> bool:
+    """Whether a new pose is kept: the whole body's likelihood rose and (with a
+    ``margin``) the data's, without the arms' prior, by more than it; both pairs from
+    :func:`_scores`."""
+    return after[0] > before[0] and (margin is None or after[1] > before[1] + margin)
 
 
 def _scores(filt: SkeletonFilter, points: np.ndarray, state: np.ndarray) -> tuple[float, float]:

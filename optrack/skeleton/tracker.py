@@ -223,7 +223,8 @@ class SkeletonTracker:
         right leg (the last limb) has been searched again, and while tracking every
         ``_SWAP_EVERY`` updates. Returns whether a limb moved."""
         chosen = []
-        if stamp - self._started < float(self.params.limb_research_s):
+        researching = stamp - self._started < float(self.params.limb_research_s)
+        if researching:
             chosen.append(LIMBS[self._turn % len(LIMBS)])
             self._turn += 1
         if self.state == "tracking":
@@ -241,11 +242,9 @@ class SkeletonTracker:
         for limb in chosen:
             moved |= search_limb_again(self.filter, points, limb, share, None, margin)
         self._updates += 1
-        if (
-            chosen
-            and chosen[0] == "right_leg"
-            and stamp - self._started < float(self.params.limb_research_s)
-        ) or (self.state == "tracking" and self._updates % _SWAP_EVERY == 0):
+        if (researching and chosen[0] == "right_leg") or (
+            self.state == "tracking" and self._updates % _SWAP_EVERY == 0
+        ):
             moved |= swap_legs(self.filter, points, margin)
         check = self._limb_to_check(stamp, chosen)
         if check is not None:

@@ -282,7 +282,8 @@ def _crossed(truth: np.ndarray) -> np.ndarray:
         dims = list(PARTITIONS[f"{leg}_leg"])
         own = [POINTS.index(f"{leg}_knee"), POINTS.index(f"{leg}_ankle")]
         targets = joints[[POINTS.index(f"{other}_knee"), POINTS.index(f"{other}_ankle")]]
-        crossed[dims] = _reach(SHAPE, truth, dims, own, targets)
+        start = truth[list(PARTITIONS[f"{other}_leg"])]
+        crossed[dims] = _reach(SHAPE, truth, dims, own, targets, start)
     return crossed
 
 
