@@ -104,7 +104,8 @@ _CHECK_LAYERS = 6
 # 0-0.09 (walk, squat).
 _CHECK_MARGIN = 0.1
 # While tracking, the legs are tried the other way round (swap_legs) every this many
-# updates: each try where the knees are crossed or close costs 10-14 ms of CPU.
+# updates (a try, where the knees are crossed or close, solves two legs by least squares
+# and anneals them: several times a frame's limb step).
 _SWAP_EVERY = 4
 # The parts whose support tells whether a limb is lost: its bones (the feet, cut by the
 # fusion's floor margin, hold few points even when found).
