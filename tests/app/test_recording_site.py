@@ -156,16 +156,23 @@ def test_pausing_keeps_the_people_stepping_moves_them_and_resuming_keeps_their_i
     # to the same instant. Under load a node busy with its stepped frame sends nothing
     # meanwhile, and the people only it sees leave the top view until its frame comes:
     # wait for the scene rather than a fixed time.
-    def kept_ids() -> set[int]:
-        return set(window.top_view.track_positions()) & set(before)
+    # The most of them seen at once: a track the view drops for a frame under load (its
+    # node late with the stepped frame) has not lost its ID.
+    kept: set[int] = set()
+
+    def enough_kept() -> bool:
+        now = set(window.top_view.track_positions()) & set(before)
+        if len(now) > len(kept):
+            kept.clear()
+            kept.update(now)
+        return len(kept) >= len(before) - 1
 
     with contextlib.suppress(qtbot.TimeoutError):  # the assertion below says what was seen
-        qtbot.waitUntil(lambda: len(kept_ids()) >= len(before) - 1, timeout=10000)
+        qtbot.waitUntil(enough_kept, timeout=10000)
     qtbot.wait(500)
     assert panel.paused and _frames(window) == stepped  # one frame, then still
     after = set(window.top_view.track_positions())
-    kept = after & set(before)
-    assert kept and len(kept) >= len(before) - 1, (before, after, stepped)
+    assert kept and len(kept) >= len(before) - 1, (before, kept, after, stepped)
     played = _played(window)
     panel.pause_button.click()  # now "Resume"
     qtbot.waitUntil(lambda: not panel.paused and _played(window) > played + 0.1, timeout=30000)
