@@ -10,7 +10,13 @@ uniformly within its joint limits, is annealed the same way against the fixed
 torso; then each
 leg. A second, finer round repeats the partitions from that estimate; of the
 two headings, the one whose full-body likelihood is higher is kept (the feet
-and the knees, which bend one way only, tell front from back).
+and the knees, which bend one way only, tell front from back). Last, each arm is
+tried hanging at rest and kept so unless the pose found explains the cloud
+clearly better (``hang_arm``: an arm the sensors do not see hangs).
+
+While tracking starts, the tracker tries the legs the other way round
+(``swap_legs``) and the whole body turned round (``turn_around``), each kept
+only where the data's likelihood rises by a margin.
 """
 
 from __future__ import annotations
@@ -19,8 +25,10 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from optrack.skeleton.filter import SkeletonFilter, motion_spread
+from optrack.skeleton.joints import JOINTS
 from optrack.skeleton.likelihood import log_likelihood
 from optrack.skeleton.model import (
+    DOFS,
     LIMITS,
     PARTITIONS,
     PARTS,
@@ -43,7 +51,9 @@ __all__ = [
     "pose_log_likelihood",
     "search_limb",
     "search_limb_again",
+    "hang_arm",
     "swap_legs",
+    "turn_around",
 ]
 
 LIMBS = ("left_arm", "right_arm", "left_leg", "right_leg")
@@ -87,6 +97,26 @@ _LIMB_TRIES = 2
 # with two sensors: -0.25 to +0.05 m; found right: -0.03 to +0.41 m, crossed at the knees
 # only as they pass each other.
 _KNEES_APART = 0.05
+# turn_around: each joint of the body turned round is put where its mirror image (left for
+# right) is; the numbers negated in the turned body's first guess (leaning forward, seen
+# from behind, is leaning back; a limb swung forward is then swung back).
+_MIRROR = [JOINTS.index(j.replace("left", "@").replace("right", "left").replace("@", "right")) for j in JOINTS]  # fmt: skip
+_TURN_NEGATED = [
+    DOFS.index(name)
+    for name in ("root_pitch", "root_roll", "spine_flex", "spine_lateral", "neck_flex",
+                 "neck_lateral", "left_shoulder_flex", "right_shoulder_flex", "left_hip_flex",
+                 "right_hip_flex")
+]  # fmt: skip
+# The least squares' evaluations of the kinematics: a knee cannot bend forward, so the
+# mirror image is never met exactly and the solver would creep on (to 1,800 evaluations,
+# 1.9 s); the refinement after it finishes the pose.
+_TURN_EVALUATIONS = 80
+# Rounds of every partition refining both poses (as found, turned) before they are
+# compared, and the particles they anneal (a pose near the start: fewer than a frame's).
+_TURN_ROUNDS = 2
+_TURN_PARTICLES = 1000
+# hang_arm's particles (one arm's four angles from near its rest pose).
+_HANG_PARTICLES = 500
 # Points higher than this share of the height are the chest and shoulders.
 _CHEST_BAND = (0.62, 0.8)
 
@@ -255,6 +285,50 @@ def swap_legs(filt: SkeletonFilter, points: np.ndarray, margin: float) -> bool:
     return False
 
 
+def turn_around(filt: SkeletonFilter, points: np.ndarray, margin: float) -> bool:
+    """A body found facing backwards (left for right, front for back) explains a cloud
+    seen by two sensors about as well as the true one, and tracking does not undo it where
+    the person does not travel (``facing_speed`` cannot tell). Try it turned round: every
+    joint put where its mirror image is (least squares on every number, within the
+    limits, from the heading turned by half a turn and each limb starting from the other's
+    angles), then both poses, as found and turned, refined alike (``_TURN_ROUNDS`` rounds of
+    every partition over ``init_layers`` layers: a pose tracked for many frames against one
+    just made is not a fair match). The turned one is kept where ``_better`` says so with
+    ``margin``; else the filter is left exactly as it was, its random numbers included.
+    Returns whether it turned."""
+    before = filt.estimate.copy()
+    joints = forward_kinematics(before, filt.shape)[0][: len(JOINTS)]
+    start = before.copy()
+    start[3] += np.pi
+    for side, other in (("left", "right"), ("right", "left")):
+        for limb in ("arm", "leg"):
+            start[list(PARTITIONS[f"{side}_{limb}"])] = before[list(PARTITIONS[f"{other}_{limb}"])]
+    start[_TURN_NEGATED] *= -1.0
+    everything = list(range(D))
+    turned = _reach(
+        filt.shape, before, everything, everything[: len(JOINTS)], joints[_MIRROR], start,
+        _TURN_EVALUATIONS,
+    )  # fmt: skip
+    kept, motion = filt.particles.copy(), filt.limb_velocity.copy()
+    stream = filt.rng.bit_generator.state
+    fine = motion_spread(filt.params, _FINE_DT)
+    refined = []
+    for pose in (before, turned):
+        filt.estimate = pose
+        for _ in range(_TURN_ROUNDS):
+            filt.reset(filt.estimate, fine)
+            filt.particles = filt.particles[:_TURN_PARTICLES]
+            for name in PARTITIONS:
+                filt.anneal(points, name, int(filt.params.init_layers), fine)
+        refined.append((filt.estimate, _scores(filt, points, filt.estimate)))
+    if _better(refined[0][1], refined[1][1], margin):
+        filt.reset(refined[1][0])
+        return True
+    filt.estimate, filt.particles, filt.limb_velocity = before, kept, motion
+    filt.rng.bit_generator.state = stream
+    return False
+
+
 def _reach(
     shape: BodyShape,
     state: np.ndarray,
@@ -262,9 +336,11 @@ def _reach(
     own: list[int],
     targets: np.ndarray,
     start: np.ndarray,
+    evaluations: int | None = None,
 ) -> np.ndarray:
     """The angles ``dims`` of ``state`` that bring its points ``own`` nearest ``targets``
-    (metres, least squares, within the angles' limits), from the angles ``start``."""
+    (metres, least squares, within the angles' limits), from the angles ``start``, after
+    at most ``evaluations`` evaluations of the kinematics (None: until it converges)."""
     low, high = LIMITS[dims, 0], LIMITS[dims, 1]
 
     def residual(angles: np.ndarray) -> np.ndarray:
@@ -274,7 +350,9 @@ def _reach(
 
     start = np.clip(start, low + 1e-6, high - 1e-6)
     # The kinematics run in float32: finite differences need a step well above its rounding.
-    return least_squares(residual, start, bounds=(low, high), diff_step=1e-3, xtol=1e-4).x
+    return least_squares(
+        residual, start, bounds=(low, high), diff_step=1e-3, xtol=1e-4, max_nfev=evaluations
+    ).x
 
 
 def _better(before: tuple[float, float], after: tuple[float, float], margin: float | None) -> bool:
@@ -316,7 +394,8 @@ def initialise(filt: SkeletonFilter, points: np.ndarray) -> np.ndarray:
 
     Both headings along the body's axis are completed and the full body's likelihood
     chooses, even where the feet seem sure: mid-stride they were wrong (the run clip,
-    fusion and tracker seeds 1: 136 degrees off, 88 % of marker-frames lost)."""
+    fusion and tracker seeds 1: 136 degrees off, 88 % of marker-frames lost). Then each
+    arm is tried at rest (:func:`hang_arm`, with ``limb_research_margin``)."""
     points = np.asarray(points, dtype=np.float64)
     best_state, best_score = None, -np.inf
     headings, _ = facing_candidates(points, filt.shape, body_axis(filt, points))
@@ -326,4 +405,37 @@ def initialise(filt: SkeletonFilter, points: np.ndarray) -> np.ndarray:
         if score > best_score:
             best_state, best_score = state, score
     filt.reset(best_state)
-    return best_state
+    margin = float(filt.params.limb_research_margin)
+    for arm in ("left_arm", "right_arm"):
+        hang_arm(filt, points, arm, margin)
+    return filt.estimate.copy()
+
+
+def hang_arm(filt: SkeletonFilter, points: np.ndarray, arm: str, margin: float) -> bool:
+    """An arm the data do not place is put at rest. With two sensors an arm the trunk
+    hides, or one lying on the head's or the chest's points, is held wherever the search
+    left it (the walk clip with two sensors: a wrist folded overhead, 0.7-0.9 m off, for
+    the rest of the clip), and hanging at the side is the likeliest pose of an arm not
+    seen. So the arm is put at rest and annealed from there (``init_layers`` layers over
+    ``_HANG_PARTICLES`` particles, the rest of the body fixed), and that
+    pose is kept unless the pose found explains the data better by ``margin`` (``_better``,
+    the found pose in the place of a new one: here the burden of proof is on the found
+    pose). A raised arm that is seen keeps its place: hanging, its points go unexplained.
+    Where the found pose stays, the filter is left exactly as it was, its random numbers
+    included. Returns whether the arm was put at rest."""
+    found, kept, motion = filt.estimate.copy(), filt.particles.copy(), filt.limb_velocity.copy()
+    stream = filt.rng.bit_generator.state
+    dims = list(PARTITIONS[arm])
+    rest = found.copy()
+    rest[dims] = _REST[arm]
+    spread = np.zeros(D)
+    spread[dims] = _REST_SPREAD
+    filt.reset(rest, spread)
+    filt.particles = filt.particles[:_HANG_PARTICLES]
+    filt.anneal(points, arm, int(filt.params.init_layers), spread)
+    if not _better(_scores(filt, points, filt.estimate), _scores(filt, points, found), margin):
+        filt.reset(filt.estimate)
+        return True
+    filt.estimate, filt.particles, filt.limb_velocity = found, kept, motion
+    filt.rng.bit_generator.state = stream
+    return False

@@ -9,7 +9,8 @@ joints of optrack/skeleton/joints.py, a confidence per joint, and a state:
   search (optrack/skeleton/init.py), the next ones refine it as tracking does
   and, for ``limb_research_s``, search one limb again a frame, in turn (after both
   legs, the legs are also tried the other way round: init.py's ``swap_legs``, which
-  tracking also tries every fourth update);
+  tracking also tries every fourth update; after the second and third rounds, the
+  whole body turned round: ``turn_around``);
 - ``tracking``: the estimate explains at least ``track_fraction``; with
   ``limb_check_s`` (off by default) each limb, in turn, is checked about that often by
   a short search again, kept only where the whole body explains the cloud better (a
@@ -21,7 +22,8 @@ joints of optrack/skeleton/joints.py, a confidence per joint, and a state:
 
 While tracking, a skeleton moving over the floor against where it faces
 (``facing_speed``) initialises again facing the motion: it was started facing
-backwards, left and right swapped.
+backwards, left and right swapped (one that does not travel is turned round by
+``turn_around`` in its first second, where the data prefer it).
 
 A joint's confidence is the support of the areas of interest next to it
 (how many of the points they should hold they hold, capped at 1), times the
@@ -52,6 +54,7 @@ from optrack.skeleton.init import (
     pose_log_likelihood,
     search_limb_again,
     swap_legs,
+    turn_around,
 )
 from optrack.skeleton.joints import JOINTS
 from optrack.skeleton.model import PARTS, BodyShape, forward_kinematics
@@ -107,6 +110,11 @@ _CHECK_MARGIN = 0.1
 # updates (a try, where the knees are crossed or close, solves two legs by least squares
 # and anneals them: several times a frame's limb step).
 _SWAP_EVERY = 4
+# In the first limb_research_s, the body is tried turned round (turn_around) after these
+# rounds of the limbs' searches again (a round: each limb once), counted from the start:
+# about 0.25 s and 0.4 s after it at 30 Hz, once the limbs have been found again (a try
+# costs about 0.2 s of CPU, so not at every round).
+_TURN_CYCLES = (2, 3)
 # The parts whose support tells whether a limb is lost: its bones (the feet, cut by the
 # fusion's floor margin, hold few points even when found).
 _LIMB_PARTS = {
@@ -145,6 +153,7 @@ class SkeletonTracker:
         self._stamp: float | None = None
         self._started = -np.inf  # when the skeleton last initialised
         self._turn = 0  # the next limb searched again after initialisation
+        self._rounds = 0  # rounds of the limbs' searches since the skeleton started
         self._updates = 0  # updates with a pose (swap_legs's turn)
         self._checked = -np.inf  # when a limb was last checked while tracking
         self._backwards = 0  # frames in a row moving against where the pelvis faces
@@ -161,11 +170,11 @@ class SkeletonTracker:
         self._stamp = float(stamp)
         if self.filter is None or self.state == "lost":
             self._start(points)
-            self._started = float(stamp)
+            self._started, self._rounds = float(stamp), 0
         else:
             self.filter.step(points, dt)
         if self.state == "tracking" and self._face_the_motion(points):
-            self._started = float(stamp)
+            self._started, self._rounds = float(stamp), 0
         explained, support = self.filter.fit(points)
         if self._search_limbs(points, support, float(stamp)):
             explained, support = self.filter.fit(points)
@@ -222,7 +231,10 @@ class SkeletonTracker:
         The legs are also tried the other way round (``swap_legs``, the same margin; only
         where the knees are crossed or close): in the first ``limb_research_s`` once the
         right leg (the last limb) has been searched again, and while tracking every
-        ``_SWAP_EVERY`` updates. Returns whether a limb moved."""
+        ``_SWAP_EVERY`` updates. In the first ``limb_research_s`` only, after the second and
+        the third round of the limbs' searches (``_TURN_CYCLES``), the whole body is also
+        tried turned round (``turn_around``, the same margin: several frames' work, so only
+        while a start's front and back are in doubt). Returns whether a limb moved."""
         chosen = []
         researching = stamp - self._started < float(self.params.limb_research_s)
         if researching:
@@ -243,9 +255,12 @@ class SkeletonTracker:
         for limb in chosen:
             moved |= search_limb_again(self.filter, points, limb, share, None, margin)
         self._updates += 1
-        if (researching and chosen[0] == "right_leg") or (
-            self.state == "tracking" and self._updates % _SWAP_EVERY == 0
-        ):
+        if researching and chosen[0] == "right_leg":  # each limb has been searched again
+            self._rounds += 1
+            moved |= swap_legs(self.filter, points, margin)
+            if self._rounds in _TURN_CYCLES:
+                moved |= turn_around(self.filter, points, margin)
+        elif self.state == "tracking" and self._updates % _SWAP_EVERY == 0:
             moved |= swap_legs(self.filter, points, margin)
         check = self._limb_to_check(stamp, chosen)
         if check is not None:
