@@ -261,7 +261,8 @@ SKELETON_PARAMS = register(
                 "new pose only where the data's log-likelihood (without the arms' collision "
                 "prior) rises by more than this: a limb already found gains up to about "
                 "0.13 by chance, on points it does not own; a misplaced one gains 0.3 and "
-                "more.",
+                "more. The same margin decides the legs exchanged, the body turned round "
+                "in its first second, and an arm kept away from rest at the start.",
             ),
             Param(
                 "limb_check_s",
