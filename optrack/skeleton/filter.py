@@ -229,6 +229,21 @@ class SkeletonFilter:
         self.particles = _clamp(self.estimate[None, :] + noise)
         self.limb_velocity[:] = 0.0  # a new pose: its limbs' motion is unknown
 
+    def snapshot(self) -> tuple:
+        """The filter as it is now, for :meth:`restore`: its estimate, particles, limbs'
+        velocity and random stream (a try that is refused leaves no trace)."""
+        return (
+            self.estimate.copy(), self.particles.copy(), self.limb_velocity.copy(),
+            self.rng.bit_generator.state,
+        )  # fmt: skip
+
+    def restore(self, snapshot: tuple) -> None:
+        """Put the filter back as :meth:`snapshot` found it."""
+        estimate, particles, limb_velocity, stream = snapshot
+        self.estimate, self.particles = estimate.copy(), particles.copy()
+        self.limb_velocity = limb_velocity.copy()
+        self.rng.bit_generator.state = stream
+
     def stop_limb(self, dims: list[int]) -> None:
         """Forget the angular velocity of the limb numbers ``dims`` (a limb found anew)."""
         self.limb_velocity[np.asarray(dims) - _LIMBS.start] = 0.0

@@ -111,6 +111,8 @@ _TURN_NEGATED = [
 # mirror image is never met exactly and the solver would creep on (to 1,800 evaluations,
 # 1.9 s); the refinement after it finishes the pose.
 _TURN_EVALUATIONS = 80
+# _reach's finite-difference step (radians, relative above 1 rad).
+_DIFF_STEP = 1e-3
 # Rounds of every partition refining both poses (as found, turned) before they are
 # compared, and the particles they anneal (a pose near the start: fewer than a frame's).
 _TURN_ROUNDS = 2
@@ -258,7 +260,8 @@ def swap_legs(filt: SkeletonFilter, points: np.ndarray, margin: float) -> bool:
     would; kept where the data's likelihood (without the arms' prior) rises by more than
     ``margin`` and the whole body's rises. Tried only where the knees are crossed or about
     level (the left knee less than ``_KNEES_APART`` to the left of the right one, along the
-    hips' line): legs the right way round but crossed at the knees are rare. Returns
+    hips' line): legs the right way round but crossed at the knees are rare. A refused
+    exchange leaves the filter exactly as it was, its random numbers included. Returns
     whether the legs were exchanged."""
     before = filt.estimate.copy()
     joints = forward_kinematics(before, filt.shape)[0]
@@ -266,7 +269,7 @@ def swap_legs(filt: SkeletonFilter, points: np.ndarray, margin: float) -> bool:
     knees = joints[POINTS.index("left_knee")] - joints[POINTS.index("right_knee")]
     if knees @ hips / max(float(np.linalg.norm(hips)), 1e-9) > _KNEES_APART:
         return False
-    kept, motion = filt.particles.copy(), filt.limb_velocity.copy()
+    saved = filt.snapshot()
     scores = _scores(filt, points, before)
     swapped = before.copy()
     for leg, other in (("left", "right"), ("right", "left")):
@@ -281,7 +284,7 @@ def swap_legs(filt: SkeletonFilter, points: np.ndarray, margin: float) -> bool:
         filt.anneal(points, leg, int(filt.params.layers), fine)
     if _better(scores, _scores(filt, points, filt.estimate), margin):
         return True
-    filt.estimate, filt.particles, filt.limb_velocity = before, kept, motion
+    filt.restore(saved)
     return False
 
 
@@ -309,8 +312,7 @@ def turn_around(filt: SkeletonFilter, points: np.ndarray, margin: float) -> bool
         filt.shape, before, everything, everything[: len(JOINTS)], joints[_MIRROR], start,
         _TURN_EVALUATIONS,
     )  # fmt: skip
-    kept, motion = filt.particles.copy(), filt.limb_velocity.copy()
-    stream = filt.rng.bit_generator.state
+    saved = filt.snapshot()
     fine = motion_spread(filt.params, _FINE_DT)
     refined = []
     for pose in (before, turned):
@@ -324,8 +326,7 @@ def turn_around(filt: SkeletonFilter, points: np.ndarray, margin: float) -> bool
     if _better(refined[0][1], refined[1][1], margin):
         filt.reset(refined[1][0])
         return True
-    filt.estimate, filt.particles, filt.limb_velocity = before, kept, motion
-    filt.rng.bit_generator.state = stream
+    filt.restore(saved)
     return False
 
 
@@ -343,15 +344,26 @@ def _reach(
     at most ``evaluations`` evaluations of the kinematics (None: until it converges)."""
     low, high = LIMITS[dims, 0], LIMITS[dims, 1]
 
+    def points(angles: np.ndarray) -> np.ndarray:  # (len(angles), len(own), 3)
+        trials = np.repeat(state[None], len(angles), axis=0)
+        trials[:, dims] = angles
+        return forward_kinematics(trials, shape)[0][:, own]
+
     def residual(angles: np.ndarray) -> np.ndarray:
-        trial = state.copy()
-        trial[dims] = angles
-        return (forward_kinematics(trial, shape)[0][own] - targets).ravel()
+        return (points(angles[None])[0] - targets).ravel()
+
+    def jacobian(angles: np.ndarray) -> np.ndarray:
+        # Forward differences, every angle's step in one batch of the kinematics (which run
+        # in float32: the step must stay well above its rounding); a step that would leave
+        # the limits goes the other way.
+        step = _DIFF_STEP * np.maximum(1.0, np.abs(angles))
+        step[angles + step > high] *= -1.0
+        moved = points(np.vstack([angles, angles + np.diag(step)]))
+        return ((moved[1:] - moved[0]) / step[:, None, None]).reshape(len(dims), -1).T
 
     start = np.clip(start, low + 1e-6, high - 1e-6)
-    # The kinematics run in float32: finite differences need a step well above its rounding.
     return least_squares(
-        residual, start, bounds=(low, high), diff_step=1e-3, xtol=1e-4, max_nfev=evaluations
+        residual, start, jac=jacobian, bounds=(low, high), xtol=1e-4, max_nfev=evaluations
     ).x
 
 
@@ -423,8 +435,7 @@ def hang_arm(filt: SkeletonFilter, points: np.ndarray, arm: str, margin: float) 
     pose). A raised arm that is seen keeps its place: hanging, its points go unexplained.
     Where the found pose stays, the filter is left exactly as it was, its random numbers
     included. Returns whether the arm was put at rest."""
-    found, kept, motion = filt.estimate.copy(), filt.particles.copy(), filt.limb_velocity.copy()
-    stream = filt.rng.bit_generator.state
+    found, saved = filt.estimate.copy(), filt.snapshot()
     dims = list(PARTITIONS[arm])
     rest = found.copy()
     rest[dims] = _REST[arm]
@@ -436,6 +447,5 @@ def hang_arm(filt: SkeletonFilter, points: np.ndarray, arm: str, margin: float) 
     if not _better(_scores(filt, points, filt.estimate), _scores(filt, points, found), margin):
         filt.reset(filt.estimate)
         return True
-    filt.estimate, filt.particles, filt.limb_velocity = found, kept, motion
-    filt.rng.bit_generator.state = stream
+    filt.restore(saved)
     return False

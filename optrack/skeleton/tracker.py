@@ -152,15 +152,25 @@ class SkeletonTracker:
         self.state: State = "initialising"
         self._stamp: float | None = None
         self._started = -np.inf  # when the skeleton last initialised
-        self._turn = 0  # the next limb searched again after initialisation
-        self._rounds = 0  # rounds of the limbs' searches since the skeleton started
+        self._turn = 0  # the limbs searched again (or checked) since the skeleton started
         self._updates = 0  # updates with a pose (swap_legs's turn)
         self._checked = -np.inf  # when a limb was last checked while tracking
         self._backwards = 0  # frames in a row moving against where the pelvis faces
         self._misses = 0
+        self._last: SkeletonEstimate | None = None  # the last update's estimate
 
     def update(self, points_world: np.ndarray, stamp: float) -> SkeletonEstimate:
-        """Take the person's cloud (N, 3) at time ``stamp`` (s); return the estimate."""
+        """Take the person's cloud (N, 3) at time ``stamp`` (s); return the estimate. A
+        cloud stamped at or before the last one is not a new instant (a second sensor's
+        cloud of the same frame, or a late one): the last estimate is returned as it was
+        (stepped over no time, the filter would resample its particles without motion
+        and could jump; the skeleton node's test saw the head move 0.3 m)."""
+        if self._last is not None and float(stamp) <= self._last.stamp:
+            return self._last
+        self._last = self._update(points_world, float(stamp))
+        return self._last
+
+    def _update(self, points_world: np.ndarray, stamp: float) -> SkeletonEstimate:
         p = self.params
         points = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
         points = points[np.all(np.isfinite(points), axis=1)]
@@ -170,11 +180,11 @@ class SkeletonTracker:
         self._stamp = float(stamp)
         if self.filter is None or self.state == "lost":
             self._start(points)
-            self._started, self._rounds = float(stamp), 0
+            self._started, self._turn = float(stamp), 0
         else:
             self.filter.step(points, dt)
         if self.state == "tracking" and self._face_the_motion(points):
-            self._started, self._rounds = float(stamp), 0
+            self._started, self._turn = float(stamp), 0
         explained, support = self.filter.fit(points)
         if self._search_limbs(points, support, float(stamp)):
             explained, support = self.filter.fit(points)
@@ -256,9 +266,8 @@ class SkeletonTracker:
             moved |= search_limb_again(self.filter, points, limb, share, None, margin)
         self._updates += 1
         if researching and chosen[0] == "right_leg":  # each limb has been searched again
-            self._rounds += 1
             moved |= swap_legs(self.filter, points, margin)
-            if self._rounds in _TURN_CYCLES:
+            if self._turn // len(LIMBS) in _TURN_CYCLES:  # the rounds since the start
                 moved |= turn_around(self.filter, points, margin)
         elif self.state == "tracking" and self._updates % _SWAP_EVERY == 0:
             moved |= swap_legs(self.filter, points, margin)

@@ -98,3 +98,29 @@ def test_filter_recovers_a_known_pose_from_its_own_cloud(sensors, worst):
     error = np.linalg.norm(forward_kinematics(estimate, shape)[0][: len(JOINTS)] - joints, axis=1)
     assert error.mean() < 0.04, error.round(3)
     assert error.max() < worst, error.round(3)  # the head, the least constrained, is worst
+
+
+def test_a_snapshot_restores_the_filter_exactly_random_numbers_included():
+    shape = BodyShape.from_height(1.75)
+    truth = rest_state(shape, 0.2, -0.4, 0.5)
+    rng = np.random.default_rng(2)
+    filt = SkeletonFilter(shape, SKELETON_PARAMS.create({"particles": 300}), seed=3)
+    filt.reset(truth, 0.05)
+    filt.step(seen_cloud(truth, shape, rng), 1 / 30)
+    saved = filt.snapshot()
+    estimate, particles = filt.estimate.copy(), filt.particles.copy()
+    limbs, draw = filt.limb_velocity.copy(), filt.rng.random()
+    filt.restore(saved)
+    assert filt.rng.random() == draw  # the same stream: the draw comes again
+    filt.restore(saved)
+    moved = rest_state(shape, 0.4, -0.4, 0.9)
+    filt.step(seen_cloud(moved, shape, rng), 1 / 30)  # changes all of it
+    assert not np.array_equal(filt.estimate, estimate)
+    filt.restore(saved)
+    np.testing.assert_array_equal(filt.estimate, estimate)
+    np.testing.assert_array_equal(filt.particles, particles)
+    np.testing.assert_array_equal(filt.limb_velocity, limbs)
+    assert filt.rng.random() == draw
+    filt.estimate[0] += 1.0  # the snapshot holds copies: changing the filter leaves it
+    filt.restore(saved)
+    assert filt.estimate[0] == estimate[0]

@@ -94,6 +94,26 @@ def test_tracker_initialises_tracks_loses_and_starts_again():
     assert np.linalg.norm(back.joints[0] - forward_kinematics(moved, SHAPE)[0][0]) < 0.1
 
 
+def test_a_cloud_of_the_same_instant_or_older_is_not_a_new_frame():
+    rng = np.random.default_rng(6)
+    truth = standing(rng, -0.5)
+    tracker = SkeletonTracker(SKELETON_PARAMS.create({"particles": 500}), SHAPE, seed=1)
+    for t in range(3):
+        last = tracker.update(seen_cloud(truth, SHAPE, rng), t / 30)
+    particles = tracker.filter.particles.copy()
+    # A second sensor's cloud of the same frame, then a late one: the estimate stays.
+    moved = truth.copy()
+    moved[0] += 0.3
+    for stamp in (2 / 30, 1 / 30):
+        again = tracker.update(seen_cloud(moved, SHAPE, rng), stamp)
+        assert again is last
+    np.testing.assert_array_equal(tracker.filter.particles, particles)
+    # The next instant is a frame again: the pelvis follows the cloud.
+    later = tracker.update(seen_cloud(moved, SHAPE, rng), 3 / 30)
+    assert later.stamp == 3 / 30
+    assert later.joints[0][0] - last.joints[0][0] > 0.15
+
+
 def test_a_hidden_wrist_gets_a_lower_confidence():
     rng = np.random.default_rng(6)
     truth = rest_state(SHAPE, 0.0, 0.0, 0.4)
