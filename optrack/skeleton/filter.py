@@ -81,7 +81,8 @@ def motion_spread(params: Params, dt: float) -> np.ndarray:
     dt = min(max(float(dt), 0.0), float(params.max_dt))
     spread = np.empty(D)
     spread[0:3] = params.agility_root_m
-    spread[3:6] = params.agility_root_rad
+    spread[_YAW] = params.agility_heading_rad
+    spread[4:6] = params.agility_root_rad
     spread[6:12] = params.agility_torso_rad
     spread[12:20] = params.agility_arms_rad
     spread[20:28] = params.agility_legs_rad

@@ -168,13 +168,22 @@ SKELETON_PARAMS = register(
                 help="Random walk of the pelvis position: standard deviation per second.",
             ),
             Param(
+                "agility_heading_rad",
+                6.0,
+                min=0.01,
+                max=20.0,
+                step=0.1,
+                unit="rad/s",
+                help="Random walk of the body's heading (its turn about the vertical).",
+            ),
+            Param(
                 "agility_root_rad",
                 3.0,
                 min=0.01,
                 max=20.0,
                 step=0.1,
                 unit="rad/s",
-                help="Random walk of the body's orientation.",
+                help="Random walk of the body's lean (forward and sideways).",
             ),
             Param(
                 "agility_torso_rad",

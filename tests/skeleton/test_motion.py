@@ -56,6 +56,32 @@ def test_momentum_follows_a_fast_walk_and_turn():
     assert carried < still, (carried, still)
 
 
+def _corner(heading_agility: float) -> float:
+    """Mean heading error (rad) of the pelvis over the half second after a runner's corner
+    (3 m/s, the heading turning 1.8 rad in 0.2 s, then straight on), seen by two sensors
+    and tracked from the first frame's true pose."""
+    rng = np.random.default_rng(7)
+    start = _pose(SHAPE)
+    params = SKELETON_PARAMS.create({"agility_heading_rad": heading_agility})
+    filt = SkeletonFilter(SHAPE, params, seed=1)
+    filt.reset(start)
+    truth, errors = start.copy(), []
+    for k in range(1, 27):
+        truth[3] += 9.0 / 30 if 6 <= k < 12 else 0.0
+        truth[:2] += 3.0 / 30 * np.array([np.cos(truth[3]), np.sin(truth[3])])
+        estimate = filt.step(seen_cloud(truth, SHAPE, rng, sensors=2), 1 / 30)
+        if k >= 12:
+            errors.append(abs(np.angle(np.exp(1j * (estimate[3] - truth[3])))))
+    return float(np.mean(errors))
+
+
+def test_the_heading_keeps_up_with_a_runners_corner():
+    followed = _corner(float(SKELETON_PARAMS.create().agility_heading_rad))
+    slow = _corner(3.0)  # the whole root's agility before the heading had its own
+    assert followed < 0.25, followed
+    assert followed < 0.5 * slow, (followed, slow)
+
+
 def test_velocity_is_the_roots_motion_per_second():
     rng = np.random.default_rng(6)
     start = _pose(SHAPE)
