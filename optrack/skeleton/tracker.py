@@ -239,12 +239,13 @@ class SkeletonTracker:
         pose is kept where the whole body's likelihood rose and the data's (without the
         arms' prior) by more than ``limb_research_margin`` (the check's: ``_CHECK_MARGIN``).
         The legs are also tried the other way round (``swap_legs``, the same margin; only
-        where the knees are crossed or close): in the first ``limb_research_s`` once the
-        right leg (the last limb) has been searched again, and while tracking every
-        ``_SWAP_EVERY`` updates. In the first ``limb_research_s`` only, after the second and
-        the third round of the limbs' searches (``_TURN_CYCLES``), the whole body is also
-        tried turned round (``turn_around``, the same margin: several frames' work, so only
-        while a start's front and back are in doubt). Returns whether a limb moved."""
+        where the knees are crossed or close): at every update of the first
+        ``limb_research_s`` (a runner's knees pass each other for a frame or two, and
+        only then is a try made), and while tracking every ``_SWAP_EVERY`` updates. In
+        the first ``limb_research_s`` only, after the second and the third round of the
+        limbs' searches (``_TURN_CYCLES``), the whole body is also tried turned round
+        (``turn_around``, the same margin: several frames' work, so only while a start's
+        front and back are in doubt). Returns whether a limb moved."""
         chosen = []
         researching = stamp - self._started < float(self.params.limb_research_s)
         if researching:
@@ -265,12 +266,11 @@ class SkeletonTracker:
         for limb in chosen:
             moved |= search_limb_again(self.filter, points, limb, share, None, margin)
         self._updates += 1
-        if researching and chosen[0] == "right_leg":  # each limb has been searched again
+        if researching or (self.state == "tracking" and self._updates % _SWAP_EVERY == 0):
             moved |= swap_legs(self.filter, points, margin)
-            if self._turn // len(LIMBS) in _TURN_CYCLES:  # the rounds since the start
-                moved |= turn_around(self.filter, points, margin)
-        elif self.state == "tracking" and self._updates % _SWAP_EVERY == 0:
-            moved |= swap_legs(self.filter, points, margin)
+        # Each limb has been searched again once more: after some rounds, the body turned.
+        if researching and chosen[0] == "right_leg" and self._turn // len(LIMBS) in _TURN_CYCLES:
+            moved |= turn_around(self.filter, points, margin)
         check = self._limb_to_check(stamp, chosen)
         if check is not None:
             particles = min(_CHECK_PARTICLES, len(self.filter.particles))

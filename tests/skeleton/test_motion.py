@@ -391,6 +391,21 @@ def test_tracking_exchanges_legs_found_the_wrong_way_round():
     assert np.all(errors < 0.08), errors
 
 
+def test_the_first_second_tries_the_exchange_at_every_update():
+    # Legs the wrong way round just after the start are exchanged at the next update,
+    # whichever limb's turn it is to be searched again (a runner's knees pass for a frame).
+    rng = np.random.default_rng(13)
+    truth = _stride()
+    ankles = [JOINTS.index("left_ankle"), JOINTS.index("right_ankle")]
+    true_ankles = forward_kinematics(truth, SHAPE)[0][ankles]
+    tracker = SkeletonTracker(SKELETON_PARAMS.create(), shape=SHAPE, seed=6)
+    tracker.update(seen_cloud(truth, SHAPE, rng, sensors=2), 0.0)
+    tracker.filter.reset(_crossed(truth))  # as if the start had found them so
+    found = tracker.update(seen_cloud(truth, SHAPE, rng, sensors=2), 1 / 30)
+    errors = np.linalg.norm(found.joints[ankles] - true_ankles, axis=1)
+    assert np.all(errors < 0.08), errors
+
+
 def _turned(truth: np.ndarray) -> np.ndarray:
     """The body facing backwards: every joint where its mirror image (left for right) is."""
     joints = forward_kinematics(truth, SHAPE)[0][: len(JOINTS)]
