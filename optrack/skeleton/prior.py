@@ -12,8 +12,14 @@ an elbow 0.6 m above the true one, at full confidence).
 forearm's middle and the wrist whose scaled distance (eq. 7) to the trunk's or
 the head's cylinder is under ``-collision_margin`` (that far inside, in the
 part's radii) costs ``collision_weight`` times how much further inside it is.
-A hand on the belly or arms crossed over the chest stay outside the
-cylinders and cost nothing.
+Against the head the arm's own thickness counts too (the forearm's radius, in
+the head's radii, is added to the margin's depth): an arm whose surface enters
+the head's costs, so an arm folded at the head's side, taking the points of the
+head's edge, is not free (two sensors, the walk: a hanging arm they hardly saw
+was moved there in the first second and held there). Against the trunk the
+arm's axis is tested: a hanging arm rests against the trunk's side. A hand on
+the belly or arms crossed over the chest stay outside the cylinders and cost
+nothing.
 """
 
 from __future__ import annotations
@@ -47,13 +53,13 @@ _ARMS = {
 
 
 @numba.njit(cache=True, fastmath=True)
-def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, chosen, ends, body, margin,
+def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, chosen, ends, body, margins,
             tables):  # fmt: skip
     """For each particle (P, D), the arm's summed depth inside the ``body`` rows (K, G):
     its elbow, its forearm's middle and its wrist (``ends``: the elbow's and the
     wrist's point indices), the arm's angles ``dims`` from the particle (their cosines
     and sines ``cos``, ``sin``, (P, len(dims))), the rest of the pose as in
-    ``base_rot``/``base_pts``."""
+    ``base_rot``/``base_pts``; ``margins`` (K,): the depth each row lets them reach free."""
     fparent, fdof, faxis, fsign, pparent, pframe = tables
     rot, pts = base_rot.copy(), base_pts.copy()
     cos_x, sin_x = np.zeros(D), np.zeros(D)
@@ -72,10 +78,21 @@ def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, chosen, ends
         for q in range(3):
             deepest = 0.0  # how far inside a part beyond the margin, in its radii
             for k in range(body.shape[0]):
-                deepest = max(deepest, -point_distance(tested, q, body[k])[0] - margin)
+                deepest = max(deepest, -point_distance(tested, q, body[k])[0] - margins[k])
             total += deepest
         out[p] = total
     return out
+
+
+def _margins(pts, rot, shape: BodyShape, partition: str, margin: float) -> np.ndarray:
+    """The depth (in each part's radii) an arm's points may reach inside each of
+    ``_BODY`` before they cost: ``margin``, less, for the head, the forearm's radius."""
+    side = partition.split("_")[0]
+    rows = np.array([PART_INDEX[f"{side}_forearm"], PART_INDEX["head"]])
+    forearm, head = part_geometry(pts[None], rot[None], shape, rows)[0]
+    margins = np.full(len(_BODY), margin)
+    margins[list(_BODY).index(PART_INDEX["head"])] -= float(forearm[14]) / float(head[14])
+    return margins
 
 
 class ArmCollision:
@@ -96,7 +113,7 @@ class ArmCollision:
             np.array(PARTITIONS[partition], dtype=np.int64), rot, pts, shape._offsets,
             np.array([name in frames for name in FRAMES]),
             np.array([POINTS.index(elbow), POINTS.index(wrist)], dtype=np.int64), body,
-            float(params.collision_margin), FK_TABLES,
+            _margins(pts, rot, shape, partition, float(params.collision_margin)), FK_TABLES,
         )  # fmt: skip
 
     def __call__(self, particles: np.ndarray) -> np.ndarray:

@@ -26,14 +26,18 @@ LEFT_ARM = slice(12, 16)
 
 def reference_cost(state: np.ndarray, side: str, params=PARAMS) -> float:
     """The prior by its definition: eq. 7's signed distance of the elbow, the forearm's
-    middle and the wrist to the trunk's and the head's parts (plain numpy)."""
+    middle and the wrist to the trunk's and the head's parts (plain numpy); against the
+    head, the forearm's thickness (its radius in the head's radii) counts as depth."""
     pts, rot = forward_kinematics(state, SHAPE)
     body = [PART_INDEX[name] for name in ("lower_trunk", "upper_trunk", "head")]
-    geometry = part_geometry(pts[None], rot[None], SHAPE)[:, body].astype(np.float64)
+    every = part_geometry(pts[None], rot[None], SHAPE)[0].astype(np.float64)
+    geometry = every[None, body]
+    thickness = every[PART_INDEX[f"{side}_forearm"], 14] / every[PART_INDEX["head"], 14]
+    margins = float(params.collision_margin) - np.array([0.0, 0.0, thickness])
     elbow, wrist = pts[POINTS.index(f"{side}_elbow")], pts[POINTS.index(f"{side}_wrist")]
     tested = np.array([elbow, (elbow + wrist) / 2, wrist])
     d = signed_distance(tested, geometry)[0][0]  # (3 points, 3 parts)
-    depth = np.maximum(-d - float(params.collision_margin), 0.0).max(axis=1)
+    depth = np.maximum(-d - margins, 0.0).max(axis=1)
     return float(params.collision_weight) * float(depth.sum())
 
 
@@ -52,6 +56,18 @@ def test_an_arm_folded_into_the_head_or_through_the_chest_costs():
     through_hips = arm_collision_cost(state, SHAPE, PARAMS)
     assert into_head > 0.5 and through_hips > 0.5
     assert arm_collision_cost(state, SHAPE, SKELETON_PARAMS.create({"collision_weight": 0})) == 0
+
+
+def test_an_arm_folded_at_the_heads_side_pays_for_its_thickness():
+    # The walk's arm put on the head with two sensors (traced): its axis hardly enters
+    # the head, its surface does.
+    state = rest_state(SHAPE)
+    state[16:20] = [3.02, -0.46, -1.47, 1.82]
+    folded = arm_collision_cost(state, SHAPE, PARAMS)
+    thin = BodyShape.from_height(1.75).scaled(limb_radius=0.5)
+    assert folded > 1.5
+    assert arm_collision_cost(state, thin, PARAMS) < folded - 0.5
+    assert folded == pytest.approx(reference_cost(state, "right"), abs=1e-4)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
