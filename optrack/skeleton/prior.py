@@ -84,14 +84,15 @@ def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, chosen, ends
     return out
 
 
-def _margins(pts, rot, shape: BodyShape, partition: str, margin: float) -> np.ndarray:
-    """The depth (in each part's radii) an arm's points may reach inside each of
-    ``_BODY`` before they cost: ``margin``, less, for the head, the forearm's radius."""
-    side = partition.split("_")[0]
-    rows = np.array([PART_INDEX[f"{side}_forearm"], PART_INDEX["head"]])
-    forearm, head = part_geometry(pts[None], rot[None], shape, rows)[0]
-    margins = np.full(len(_BODY), margin)
-    margins[list(_BODY).index(PART_INDEX["head"])] -= float(forearm[14]) / float(head[14])
+_HEAD = list(_BODY).index(PART_INDEX["head"])
+
+
+def _margins(body: np.ndarray, forearm: np.ndarray, margin: float) -> np.ndarray:
+    """The depth (in each part's radii) an arm's points may reach inside each of the
+    ``body`` rows (``_BODY``'s geometry) before they cost: ``margin``, less, for the
+    head, the forearm's radius (``forearm``: its geometry row)."""
+    margins = np.full(len(body), margin)
+    margins[_HEAD] -= float(forearm[14]) / float(body[_HEAD, 14])
     return margins
 
 
@@ -108,12 +109,15 @@ class ArmCollision:
             return
         frames, elbow, wrist = _ARMS[partition]
         pts, rot = forward_kinematics(np.asarray(estimate, dtype=np.float64), shape)
-        body = part_geometry(pts[None], rot[None], shape, _BODY)[0].astype(np.float64)
+        forearm = PART_INDEX[f"{partition.split('_')[0]}_forearm"]
+        rows = np.append(_BODY, forearm)  # the body it must stay out of, and its forearm
+        geometry = part_geometry(pts[None], rot[None], shape, rows)[0].astype(np.float64)
+        body = geometry[: len(_BODY)]
         self._args = (
             np.array(PARTITIONS[partition], dtype=np.int64), rot, pts, shape._offsets,
             np.array([name in frames for name in FRAMES]),
             np.array([POINTS.index(elbow), POINTS.index(wrist)], dtype=np.int64), body,
-            _margins(pts, rot, shape, partition, float(params.collision_margin)), FK_TABLES,
+            _margins(body, geometry[-1], float(params.collision_margin)), FK_TABLES,
         )  # fmt: skip
 
     def __call__(self, particles: np.ndarray) -> np.ndarray:
