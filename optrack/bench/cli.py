@@ -141,7 +141,8 @@ def cmd_bench_skeleton(args: argparse.Namespace) -> int:
     three = result["accuracy"]["3_sensors"]
     line = (
         f"{result['fps_1person_3sensors']} fps (one person, 3 sensors), "
-        f"{result['fps_4people_3sensors']} per person with four; 3 sensors: mean marker error "
+        f"{result['fps_4people_3sensors']} per person with four (reference workload "
+        f"{result['reference_ms']} ms of CPU); 3 sensors: mean marker error "
         f"{three['mean_error_m']} m, {three['lost_pct']} % lost "
         f"({len(result['clips'])} clip(s) x {result['seeds']} seed(s))"
     )

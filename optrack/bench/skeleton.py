@@ -33,7 +33,11 @@ and a digest of the simulator's code).
   ``ms_per_frame_p50``/``_p95`` are of one person's frames with three
   sensors (wall time), ``cpu_ms_per_frame_p50`` the CPU time of those frames
   (every thread's): on a loaded machine the better guide. The machine's load
-  average is reported beside them.
+  average is reported beside them, and ``reference_ms``: this computer's speed as
+  the stage sees it, the CPU time of one fixed full-body likelihood
+  (:func:`reference_ms`), the mean of its timings before and after the speed runs. A
+  shared or virtual machine's speed varies from hour to hour; two speed figures
+  compare only beside their references.
 """
 
 from __future__ import annotations
@@ -64,7 +68,7 @@ from optrack.recording import Recording
 from optrack.skeleton.fusion import FUSION_PARAMS
 from optrack.skeleton.params import SKELETON_PARAMS
 
-__all__ = ["AREA", "SPEED_CLIPS", "all_clips", "skeleton_bench"]
+__all__ = ["AREA", "SPEED_CLIPS", "all_clips", "reference_ms", "skeleton_bench"]
 
 SPEED_CLIPS = (
     "cmu_16_27_walk_turn_left.bvh",
@@ -141,6 +145,42 @@ def _run(path: Path, sensors: int, label: str, seed: int, stages: Stages) -> Ske
     return run_skeleton(
         recording, poses, recording.sensor_ids[:sensors], skeleton, fusion, seed=seed
     )
+
+
+def reference_ms(repeats: int = 5, calls: int = 10) -> float:
+    """The CPU time (ms) of one fixed workload of the stage's hot loop: the torso's
+    likelihood (13 parts) of 2000 poses near a standing 1.75 m body, against 250 points
+    spread between its joints (seeded: the same numbers every time), one thread; the
+    median over ``repeats`` of ``calls`` calls."""
+    import time
+
+    from optrack.skeleton.filter import PARTITION_FRAMES, PARTITION_PARTS
+    from optrack.skeleton.kernels import PartitionScorer
+    from optrack.skeleton.likelihood import sorted_points
+    from optrack.skeleton.model import PARTITIONS, BodyShape, D, forward_kinematics, rest_state
+
+    rng = np.random.default_rng(0)
+    shape = BodyShape.from_height(1.75)
+    estimate = rest_state(shape)
+    joints = forward_kinematics(estimate, shape)[0]
+    ends = rng.integers(0, len(joints) - 1, (250, 2))
+    along = rng.random((250, 1))
+    points = joints[ends[:, 0]] * along + joints[ends[:, 0] + 1] * (1.0 - along)
+    points += rng.normal(0.0, 0.06, points.shape)
+    particles = estimate + rng.normal(0.0, 0.05, (2000, D))
+    parts = PARTITION_PARTS["torso"]
+    scorer = PartitionScorer(
+        estimate, PARTITIONS["torso"], PARTITION_FRAMES["torso"], parts, shape,
+        sorted_points(points, None), np.full((len(parts), 2), 5.0), (0.15, 0.6, 0.5),
+    )  # fmt: skip
+    scorer(particles)  # compiled (or loaded) before it is timed
+    times = []
+    for _ in range(repeats):
+        start = time.process_time()
+        for _ in range(calls):
+            scorer(particles)
+        times.append((time.process_time() - start) * 1000.0 / calls)
+    return round(float(np.median(times)), 3)
 
 
 def _params(stages: Stages, path: str | None) -> tuple[Params, Params]:
@@ -245,9 +285,12 @@ def skeleton_bench(
     recordings = {Path(c).stem: _recording([folder / c], 1, seconds, area=True) for c in clips}
     crowd = _recording([folder / c for c in SPEED_CLIPS], 4, speed_seconds, area=False)
     runs = _accuracy_runs(recordings, seeds, jobs, stages)
-    # Speed: runs of their own, one at a time (the accuracy runs may share the cores).
+    # Speed: runs of their own, one at a time (the accuracy runs may share the cores),
+    # between two timings of the reference workload.
+    before = reference_ms()
     alone = _run(recordings[Path(clips[0]).stem], 3, "speed, one person", 0, stages)
     four = _run(crowd, 3, "speed, four people", 0, stages)
+    after = reference_ms()
     skip = 1 if len(alone.frame_ms) > 1 else 0
     steady, cpu = alone.frame_ms[skip:], alone.frame_cpu_ms[skip:]
     return {
@@ -266,5 +309,7 @@ def skeleton_bench(
         "config": config,
         "seconds_per_clip": seconds,
         "load_average": round(os.getloadavg()[0], 2),
+        "reference_ms": round((before + after) / 2.0, 3),
+        "reference_ms_before_after": [before, after],
         "cpu_count": os.cpu_count(),
     }

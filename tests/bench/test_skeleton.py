@@ -17,6 +17,7 @@ KEYS = {
     "particles",
     "points_per_person",
     "accuracy",
+    "reference_ms",
 }
 FIGURES = {"mean_error_m", "markers", "pct_under_0_10", "pct_under_0_15", "pct_under_0_20"}
 FIGURES |= {"lost_pct", "frames"}
@@ -36,6 +37,9 @@ def test_bench_skeleton_keys_on_a_few_frames(shared_data, tmp_path, monkeypatch)
     ):
         assert math.isfinite(result[key]) and result[key] > 0
     assert result["ms_per_frame_p95"] >= result["ms_per_frame_p50"]
+    # The machine's speed beside them: a fixed workload's CPU time before and after.
+    before, after = result["reference_ms_before_after"]
+    assert 0 < before and 0 < after and result["reference_ms"] == round((before + after) / 2, 3)
     assert set(result["accuracy"]) == {"3_sensors", "2_sensors", "1_sensor"}
     for setting in result["accuracy"].values():
         assert FIGURES <= set(setting)
@@ -91,3 +95,11 @@ def test_bench_skeleton_skips_without_its_clips():
 
 def test_bench_skeleton_is_registered():
     assert BENCHES["skeleton"] is cmd_bench_skeleton
+
+
+def test_the_reference_workload_is_timed_in_cpu_milliseconds():
+    """A fixed workload: one call of it costs milliseconds of CPU on any computer this
+    runs on (the torso's likelihood of 2000 poses), never nothing."""
+    from optrack.bench.skeleton import reference_ms
+
+    assert 0.05 < reference_ms(repeats=3, calls=2) < 1000.0
