@@ -23,7 +23,12 @@ import functools
 import numba
 import numpy as np
 
-from optrack.skeleton.likelihood import likelihood_within, set_threads, signed_distance
+from optrack.skeleton.likelihood import (
+    capped_prefix,
+    likelihood_within,
+    set_threads,
+    signed_distance,
+)
 from optrack.skeleton.model import (
     FK_TABLES,
     FRAMES,
@@ -47,7 +52,7 @@ GROUPS = 8  # groups of LANES poses that threads share (each makes its scratch o
 
 
 @numba.njit(fastmath=True, inline="always")
-def _fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, tables):
+def fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, tables):
     """:func:`~optrack.skeleton.model.fk_pose` for a few poses at once, the pose last in
     every array (so that each step is a vector op): xs, cs, sn (D, lanes); rot
     (F, 3, 3, lanes), pts (Q, 3, lanes); only the frames ``frames_on`` and the points
@@ -173,6 +178,7 @@ def _score_kernel(
     estimate, cos_e, sin_e = fixed
     copy_dofs, copy_frames, copy_points = copied
     n, k = particles.shape[0], parts.shape[0]
+    prefix = capped_prefix(base, consts[1])
     chunks = (n + LANES - 1) // LANES  # of LANES particles, scored together
     groups = min(chunks, GROUPS)
     for group in numba.prange(groups):  # scratch made once per group of chunks
@@ -203,14 +209,14 @@ def _score_kernel(
                 for lane in range(lanes):
                     xs[d, lane] = particles[first + lane, d]
                     cs[d, lane], sn[d, lane] = cos_p[first + lane, j], sin_p[first + lane, j]
-            _fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, fk_tables)
+            fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, fk_tables)
             _geometry_lanes(pts, rot, parts, part_tables, radii, geometry)
             _extents_lanes(geometry, axis, 1.0 + consts[1], extents)
             for lane in range(lanes):  # each pose's rows read in place (a copy cost more)
                 runs[:] = extents[:, lane]
                 out[first + lane] = likelihood_within(
-                    px, py, pz, axis, starts, grid, base, geometry[:, :, lane], expected,
-                    consts, best, area, runs,
+                    px, py, pz, axis, starts, grid, base, prefix, geometry[:, :, lane],
+                    expected, consts, best, area, runs,
                 )  # fmt: skip
 
 

@@ -28,7 +28,7 @@ import numba
 import numpy as np
 
 from optrack.params import Params
-from optrack.skeleton.kernels import point_distance
+from optrack.skeleton.kernels import LANES, fk_lanes, point_distance
 from optrack.skeleton.model import (
     FK_TABLES,
     FRAMES,
@@ -37,7 +37,6 @@ from optrack.skeleton.model import (
     POINTS,
     BodyShape,
     D,
-    fk_pose,
     forward_kinematics,
     part_geometry,
 )
@@ -53,34 +52,45 @@ _ARMS = {
 
 
 @numba.njit(cache=True, fastmath=True)
-def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, chosen, ends, body, margins,
-            tables):  # fmt: skip
+def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, frames_on, points_on, ends,
+            body, margins, tables):  # fmt: skip
     """For each particle (P, D), the arm's summed depth inside the ``body`` rows (K, G):
     its elbow, its forearm's middle and its wrist (``ends``: the elbow's and the
     wrist's point indices), the arm's angles ``dims`` from the particle (their cosines
     and sines ``cos``, ``sin``, (P, len(dims))), the rest of the pose as in
-    ``base_rot``/``base_pts``; ``margins`` (K,): the depth each row lets them reach free."""
-    fparent, fdof, faxis, fsign, pparent, pframe = tables
-    rot, pts = base_rot.copy(), base_pts.copy()
-    cos_x, sin_x = np.zeros(D), np.zeros(D)
-    tested = np.empty((3, 3))  # the elbow, the forearm's middle, the wrist
-    out = np.zeros(particles.shape[0])
-    for p in range(particles.shape[0]):
-        x = particles[p]
+    ``base_rot``/``base_pts``; ``margins`` (K,): the depth each row lets them reach free.
+    The kinematics of ``LANES`` particles at once (:func:`fk_lanes`, only the frames
+    ``frames_on`` and their points ``points_on``)."""
+    n = particles.shape[0]
+    out = np.zeros(n)
+    xs = np.zeros((D, LANES))
+    cs, sn = np.zeros((D, LANES), np.float32), np.zeros((D, LANES), np.float32)
+    rot = np.empty(base_rot.shape + (LANES,))
+    pts = np.empty(base_pts.shape + (LANES,))
+    for lane in range(LANES):
+        rot[..., lane] = base_rot
+        pts[..., lane] = base_pts
+    tested = np.empty((3, LANES, 3))  # the elbow, the forearm's middle, the wrist
+    for first in range(0, n, LANES):
+        lanes = min(LANES, n - first)
         for j in range(dims.shape[0]):
-            cos_x[dims[j]], sin_x[dims[j]] = cos[p, j], sin[p, j]
-        fk_pose(x, cos_x, sin_x, offsets, chosen, rot, pts, fparent, fdof, faxis, fsign,
-                pparent, pframe)  # fmt: skip
-        for r in range(3):
-            tested[0, r], tested[2, r] = pts[ends[0], r], pts[ends[1], r]
-            tested[1, r] = 0.5 * (tested[0, r] + tested[2, r])
-        total = 0.0
-        for q in range(3):
-            deepest = 0.0  # how far inside a part beyond the margin, in its radii
-            for k in range(body.shape[0]):
-                deepest = max(deepest, -point_distance(tested, q, body[k])[0] - margins[k])
-            total += deepest
-        out[p] = total
+            for lane in range(lanes):
+                xs[dims[j], lane] = particles[first + lane, dims[j]]
+                cs[dims[j], lane], sn[dims[j], lane] = cos[first + lane, j], sin[first + lane, j]
+        fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, tables)
+        for lane in range(lanes):
+            for r in range(3):
+                elbow, wrist = pts[ends[0], r, lane], pts[ends[1], r, lane]
+                tested[0, lane, r], tested[2, lane, r] = elbow, wrist
+                tested[1, lane, r] = 0.5 * (elbow + wrist)
+            total = 0.0
+            for q in range(3):
+                deepest = 0.0  # how far inside a part beyond the margin, in its radii
+                for k in range(body.shape[0]):
+                    depth = -point_distance(tested[q], lane, body[k])[0] - margins[k]
+                    deepest = max(deepest, depth)
+                total += deepest
+            out[first + lane] = total
     return out
 
 
@@ -109,13 +119,15 @@ class ArmCollision:
             return
         frames, elbow, wrist = _ARMS[partition]
         pts, rot = forward_kinematics(np.asarray(estimate, dtype=np.float64), shape)
+        turned = np.array([name in frames for name in FRAMES])
+        frames_on = np.flatnonzero(turned)
         forearm = PART_INDEX[f"{partition.split('_')[0]}_forearm"]
         rows = np.append(_BODY, forearm)  # the body it must stay out of, and its forearm
         geometry = part_geometry(pts[None], rot[None], shape, rows)[0].astype(np.float64)
         body = geometry[: len(_BODY)]
         self._args = (
             np.array(PARTITIONS[partition], dtype=np.int64), rot, pts, shape._offsets,
-            np.array([name in frames for name in FRAMES]),
+            frames_on, np.flatnonzero(turned[FK_TABLES[-1]]),  # the frames and their points
             np.array([POINTS.index(elbow), POINTS.index(wrist)], dtype=np.int64), body,
             _margins(body, geometry[-1], float(params.collision_margin)), FK_TABLES,
         )  # fmt: skip

@@ -10,6 +10,8 @@ from optrack.skeleton.likelihood import (
     log_likelihood,
     log_likelihood_numpy,
     signed_distance,
+    sorted_points,
+    sorted_points_numpy,
 )
 from optrack.skeleton.model import (
     PARTS,
@@ -110,6 +112,24 @@ def test_numba_fast_path_equals_the_numpy_reference(seed):
     points, geometry, expected, baseline = _random_case(seed)
     args = (points, geometry, expected, 0.15, 0.6, 0.7, baseline)
     np.testing.assert_allclose(log_likelihood(*args), log_likelihood_numpy(*args), atol=2e-4)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_sorted_cloud_is_numpys_to_the_bit(seed):
+    """The kernels' view of a cloud (sorted along its widest axis, its slices' starts, the
+    baseline in that order) is the numpy reference's: ties (points on a 1 cm grid) keep
+    their order, and a cloud of 0, 1 or 2 points has its slices too."""
+    rng = np.random.default_rng(seed)
+    for count in (0, 1, 2, 37, 500):
+        points = rng.normal(size=(count, 3)) * rng.uniform(0.1, 0.6, 3) + [1.0, -2.0, 0.9]
+        if seed % 2:
+            points = np.round(points, 2)
+        baseline = rng.uniform(0.0, 1.0, count) if count % 2 else None
+        fast, plain = sorted_points(points, baseline), sorted_points_numpy(points, baseline)
+        assert int(fast[3]) == int(plain[3])  # the axis
+        for got, want in zip(fast[:3] + fast[4:], plain[:3] + plain[4:], strict=True):
+            assert got.dtype == want.dtype
+            np.testing.assert_array_equal(got, want)
 
 
 def test_the_true_pose_is_the_most_likely():
