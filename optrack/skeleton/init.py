@@ -47,6 +47,7 @@ __all__ = [
     "facing_candidates",
     "height_from_cloud",
     "initialise",
+    "initialise_both_ways",
     "initialise_facing",
     "pose_log_likelihood",
     "search_limb",
@@ -402,7 +403,14 @@ def search_limb(
 
 def initialise(filt: SkeletonFilter, points: np.ndarray) -> np.ndarray:
     """Find a standing person's pose from nothing but their cloud (N, 3), world frame;
-    leaves the filter's particles around it and returns it (D,).
+    leaves the filter's particles around it and returns it (D,): :func:`initialise_both_ways`'s
+    pose."""
+    return initialise_both_ways(filt, points)[0]
+
+
+def initialise_both_ways(filt: SkeletonFilter, points: np.ndarray) -> tuple[np.ndarray, float]:
+    """:func:`initialise`, and how much better the heading chosen explains the cloud than the
+    other one: the full-body log-likelihoods' difference (0 where both scored alike).
 
     Both headings along the body's axis are completed and the full body's likelihood
     chooses, even where the feet seem sure: mid-stride they were wrong (the run clip,
@@ -411,16 +419,17 @@ def initialise(filt: SkeletonFilter, points: np.ndarray) -> np.ndarray:
     points = np.asarray(points, dtype=np.float64)
     best_state, best_score = None, -np.inf
     headings, _ = facing_candidates(points, filt.shape, body_axis(filt, points))
+    scores = []
     for heading in headings:
         state = initialise_facing(filt, points, heading)
-        score = pose_log_likelihood(filt, points, state)
-        if score > best_score:
-            best_state, best_score = state, score
+        scores.append(pose_log_likelihood(filt, points, state))
+        if scores[-1] > best_score:
+            best_state, best_score = state, scores[-1]
     filt.reset(best_state)
     margin = float(filt.params.limb_research_margin)
     for arm in ("left_arm", "right_arm"):
         hang_arm(filt, points, arm, margin)
-    return filt.estimate.copy()
+    return filt.estimate.copy(), float(best_score - min(scores))
 
 
 def hang_arm(filt: SkeletonFilter, points: np.ndarray, arm: str, margin: float) -> bool:

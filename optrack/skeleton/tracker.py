@@ -10,7 +10,8 @@ joints of optrack/skeleton/joints.py, a confidence per joint, and a state:
   and, for ``limb_research_s``, search one limb again a frame, in turn (after both
   legs, the legs are also tried the other way round: init.py's ``swap_legs``, which
   tracking also tries every fourth update; after the second and third rounds, the
-  whole body turned round: ``turn_around``);
+  whole body turned round: ``turn_around``, where the start's two headings explained
+  the cloud about as well: ``_TURN_DOUBT``);
 - ``tracking``: the estimate explains at least ``track_fraction``; with
   ``limb_check_s`` (off by default) each limb, in turn, is checked about that often by
   a short search again, kept only where the whole body explains the cloud better (a
@@ -49,7 +50,7 @@ from optrack.skeleton.filter import PARTITION_PARTS, SkeletonFilter
 from optrack.skeleton.init import (
     LIMBS,
     height_from_cloud,
-    initialise,
+    initialise_both_ways,
     initialise_facing,
     pose_log_likelihood,
     search_limb_again,
@@ -115,6 +116,12 @@ _SWAP_EVERY = 4
 # about 0.25 s and 0.4 s after it at 30 Hz, once the limbs have been found again (a try
 # costs about 0.2 s of CPU, so not at every round).
 _TURN_CYCLES = (2, 3)
+# ... and only after a start whose two headings were this close (the difference of their
+# full-body log-likelihoods at initialisation, init.py's initialise_both_ways): every turn
+# kept over six clips x seeds 0-23 with two sensors and 0-11 with three followed a start
+# whose headings were within 0.085 (median 0.40); a refused try leaves the filter
+# exactly as it was, so skipping the tries there changes nothing on those runs.
+_TURN_DOUBT = 0.2
 # The parts whose support tells whether a limb is lost: its bones (the feet, cut by the
 # fusion's floor margin, hold few points even when found).
 _LIMB_PARTS = {
@@ -156,6 +163,9 @@ class SkeletonTracker:
         self._updates = 0  # updates with a pose (swap_legs's turn)
         self._checked = -np.inf  # when a limb was last checked while tracking
         self._backwards = 0  # frames in a row moving against where the pelvis faces
+        # How much better the heading chosen at the last start explained the cloud than the
+        # other one (0 after a start facing the motion: it is tried turned round as ever).
+        self._heading_margin = 0.0
         self._misses = 0
         self._last: SkeletonEstimate | None = None  # the last update's estimate
 
@@ -184,7 +194,7 @@ class SkeletonTracker:
         else:
             self.filter.step(points, dt)
         if self.state == "tracking" and self._face_the_motion(points):
-            self._started, self._turn = float(stamp), 0
+            self._started, self._turn, self._heading_margin = float(stamp), 0, 0.0
         explained, support = self.filter.fit(points)
         if self._search_limbs(points, support, float(stamp)):
             explained, support = self.filter.fit(points)
@@ -245,7 +255,8 @@ class SkeletonTracker:
         the first ``limb_research_s`` only, after the second and the third round of the
         limbs' searches (``_TURN_CYCLES``), the whole body is also tried turned round
         (``turn_around``, the same margin: several frames' work, so only while a start's
-        front and back are in doubt). Returns whether a limb moved."""
+        front and back are in doubt, and only after a start whose two headings scored within
+        ``_TURN_DOUBT`` of each other). Returns whether a limb moved."""
         chosen = []
         researching = stamp - self._started < float(self.params.limb_research_s)
         if researching:
@@ -269,7 +280,12 @@ class SkeletonTracker:
         if researching or (self.state == "tracking" and self._updates % _SWAP_EVERY == 0):
             moved |= swap_legs(self.filter, points, margin)
         # Each limb has been searched again once more: after some rounds, the body turned.
-        if researching and chosen[0] == "right_leg" and self._turn // len(LIMBS) in _TURN_CYCLES:
+        if (
+            researching
+            and chosen[0] == "right_leg"
+            and self._turn // len(LIMBS) in _TURN_CYCLES
+            and self._heading_margin < _TURN_DOUBT
+        ):
             moved |= turn_around(self.filter, points, margin)
         check = self._limb_to_check(stamp, chosen)
         if check is not None:
@@ -330,7 +346,7 @@ class SkeletonTracker:
         if self.shape is None:
             self.shape = BodyShape.from_height(height_from_cloud(points))
         self.filter = SkeletonFilter(self.shape, self.params, self._seed)
-        initialise(self.filter, points)
+        _, self._heading_margin = initialise_both_ways(self.filter, points)
         self.state = "initialising"
         self._misses = 0
 

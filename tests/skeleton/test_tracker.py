@@ -5,8 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from optrack.skeleton import tracker as tracker_module
 from optrack.skeleton.filter import SkeletonFilter
-from optrack.skeleton.init import body_axis, facing_candidates, height_from_cloud, initialise
+from optrack.skeleton.init import (
+    body_axis,
+    facing_candidates,
+    height_from_cloud,
+    initialise,
+    initialise_both_ways,
+)
 from optrack.skeleton.joints import JOINTS
 from optrack.skeleton.model import BodyShape, forward_kinematics, rest_state
 from optrack.skeleton.params import SKELETON_PARAMS
@@ -70,6 +77,48 @@ def test_initialisation_finds_the_body_axis_where_the_chest_band_misleads(seed):
     state = initialise(SkeletonFilter(SHAPE, SKELETON_PARAMS.create(), seed=seed), cloud)
     assert abs(np.angle(np.exp(1j * (state[3] - heading)))) < 0.3  # facing the right way
     assert joint_errors(state, truth).mean() < 0.06
+
+
+def test_initialisation_says_how_clearly_its_heading_won():
+    rng = np.random.default_rng(5)
+    truth = standing(rng, 0.4)
+    cloud = seen_cloud(truth, SHAPE, rng)
+    state = initialise(SkeletonFilter(SHAPE, SKELETON_PARAMS.create(), seed=5), cloud)
+    same, margin = initialise_both_ways(
+        SkeletonFilter(SHAPE, SKELETON_PARAMS.create(), seed=5), cloud
+    )
+    np.testing.assert_array_equal(same, state)
+    # Seen from all around, the body facing backwards explains the cloud far worse.
+    assert margin > tracker_module._TURN_DOUBT
+
+
+def test_a_clear_start_skips_the_turned_round_tries_and_loses_nothing(monkeypatch):
+    """After a start whose heading won clearly, the body is not tried turned round; where
+    the tries would have been made they are refused, so the skeleton is the same frame by
+    frame, to the bit."""
+    rng = np.random.default_rng(6)
+    truth = standing(rng, -1.2)
+    clouds = [seen_cloud(truth, SHAPE, rng) for _ in range(14)]
+    tries = []
+    real = tracker_module.turn_around
+
+    def counted(filt, points, margin):
+        tries.append(real(filt, points, margin))
+        return tries[-1]
+
+    monkeypatch.setattr(tracker_module, "turn_around", counted)
+
+    def run(doubt: float) -> list[np.ndarray]:
+        monkeypatch.setattr(tracker_module, "_TURN_DOUBT", doubt)
+        tracker = SkeletonTracker(SKELETON_PARAMS.create(), SHAPE, seed=3)
+        return [tracker.update(cloud, t / 30).joints for t, cloud in enumerate(clouds)]
+
+    always = run(np.inf)
+    assert tries == [False, False]  # tried twice in its first half second, refused
+    default = run(0.2)
+    assert len(tries) == 2  # not tried
+    for a, b in zip(always, default, strict=True):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_tracker_initialises_tracks_loses_and_starts_again():
