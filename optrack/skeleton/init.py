@@ -53,6 +53,7 @@ __all__ = [
     "search_limb",
     "search_limb_again",
     "hang_arm",
+    "rest_arm_again",
     "swap_legs",
     "turn_around",
 ]
@@ -437,24 +438,56 @@ def hang_arm(filt: SkeletonFilter, points: np.ndarray, arm: str, margin: float) 
     hides, or one lying on the head's or the chest's points, is held wherever the search
     left it (the walk clip with two sensors: a wrist folded overhead, 0.7-0.9 m off, for
     the rest of the clip), and hanging at the side is the likeliest pose of an arm not
-    seen. So the arm is put at rest and annealed from there (``init_layers`` layers over
-    ``_HANG_PARTICLES`` particles, the rest of the body fixed), and that
+    seen. So the arm is put at rest and annealed from there (:func:`_arm_from_rest`), and that
     pose is kept unless the pose found explains the data better by ``margin`` (``_better``,
     the found pose in the place of a new one: here the burden of proof is on the found
     pose). A raised arm that is seen keeps its place: hanging, its points go unexplained.
     Where the found pose stays, the filter is left exactly as it was, its random numbers
     included. Returns whether the arm was put at rest."""
     found, saved = filt.estimate.copy(), filt.snapshot()
+    _arm_from_rest(filt, points, arm)
+    if not _better(_scores(filt, points, filt.estimate), _scores(filt, points, found), margin):
+        filt.reset(filt.estimate)
+        return True
+    filt.restore(saved)
+    return False
+
+
+def rest_arm_again(
+    filt: SkeletonFilter, points: np.ndarray, arm: str, gain: float, slack: float
+) -> bool:
+    """While tracking, :func:`hang_arm` the other way round: the arm annealed from rest is
+    kept only where the whole body's likelihood (with the arms' collision prior) rises by
+    more than ``gain`` and the data's (without it) falls by no more than ``slack``. An arm
+    the search put on points the trunk or the head explain (folded through the chest or
+    along the head: the prior's cost) goes back to hanging, which the data like as well;
+    an arm the data place stays (at rest, its points go unexplained). The limb's particles
+    then all take the estimate and its velocity is forgotten; where the arm stays, the
+    filter is left exactly as it was, its random numbers included. Returns whether the
+    arm was put at rest."""
+    found, saved = filt.estimate.copy(), filt.snapshot()
+    rest = _arm_from_rest(filt, points, arm)
+    filt.restore(saved)
+    before, after = _scores(filt, points, found), _scores(filt, points, rest)
+    if not (after[0] > before[0] + gain and after[1] > before[1] - slack):
+        return False
     dims = list(PARTITIONS[arm])
-    rest = found.copy()
+    filt.estimate[dims] = rest[dims]
+    filt.stop_limb(dims)
+    filt.particles[:, dims] = rest[dims]
+    return True
+
+
+def _arm_from_rest(filt: SkeletonFilter, points: np.ndarray, arm: str) -> np.ndarray:
+    """The arm put at rest and annealed from there (``init_layers`` layers over
+    ``_HANG_PARTICLES`` particles, the rest of the body fixed); leaves the filter's particles
+    there and returns its estimate."""
+    dims = list(PARTITIONS[arm])
+    rest = filt.estimate.copy()
     rest[dims] = _REST[arm]
     spread = np.zeros(D)
     spread[dims] = _REST_SPREAD
     filt.reset(rest, spread)
     filt.particles = filt.particles[:_HANG_PARTICLES]
     filt.anneal(points, arm, int(filt.params.init_layers), spread)
-    if not _better(_scores(filt, points, filt.estimate), _scores(filt, points, found), margin):
-        filt.reset(filt.estimate)
-        return True
-    filt.restore(saved)
-    return False
+    return filt.estimate.copy()

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from optrack.skeleton import tracker as tracker_module
 from optrack.skeleton.filter import SkeletonFilter, motion_spread
-from optrack.skeleton.init import _reach, hang_arm, swap_legs, turn_around
+from optrack.skeleton.init import _reach, hang_arm, rest_arm_again, swap_legs, turn_around
 from optrack.skeleton.joints import JOINTS, MARKERS
 from optrack.skeleton.model import (
     DOFS,
@@ -205,9 +206,49 @@ def _misplaced_arm(check_s: float, seed: int = 9) -> float:
     )
 
 
-def test_a_limb_on_wrong_points_is_found_by_the_periodic_check():
+def test_a_limb_on_wrong_points_is_found_by_the_periodic_check(monkeypatch):
+    monkeypatch.setattr(tracker_module, "_REST_EVERY", 10**9)  # no arm tried at rest
     assert _misplaced_arm(0.0) > 0.3  # tracking alone leaves it overhead
     assert _misplaced_arm(0.5) < 0.08
+
+
+def test_an_arm_folded_along_the_head_while_it_hangs_is_put_back_at_rest():
+    # The same wrong arm, no periodic check: tracking's arm-at-rest tries put it back.
+    assert _misplaced_arm(0.0) < 0.08
+
+
+def test_an_arm_tried_at_rest_while_tracking_stays_where_the_data_place_it():
+    rng = np.random.default_rng(16)
+    truth = _pose(SHAPE)
+    arm = list(PARTITIONS["left_arm"])
+    truth[arm] = [2.8, 0.3, 0.0, 0.3]  # raised overhead and seen: a wave
+    cloud = seen_cloud(truth, SHAPE, rng, sensors=2)
+    params = SKELETON_PARAMS.create()
+    filt = SkeletonFilter(SHAPE, params, seed=8)
+    filt.reset(truth, motion_spread(params, 0.05))
+    before, particles = filt.estimate.copy(), filt.particles.copy()
+    stream = filt.rng.bit_generator.state
+    assert not rest_arm_again(filt, cloud, "left_arm", 0.3, 0.05)
+    # Left exactly as it was, its random numbers too.
+    assert np.array_equal(filt.estimate, before)
+    assert np.array_equal(filt.particles, particles)
+    assert filt.rng.bit_generator.state == stream
+    # Hanging, while the estimate holds it folded along the head: put at rest, the rest
+    # of the body untouched, every particle's arm on the estimate's.
+    hanging = truth.copy()
+    hanging[arm] = [0.0, 0.1, 0.0, 0.3]
+    folded = hanging.copy()
+    folded[arm] = [3.0, -0.6, 1.0, 0.8]
+    cloud = seen_cloud(hanging, SHAPE, rng, sensors=2)
+    filt.reset(folded, motion_spread(params, 0.05))
+    assert rest_arm_again(filt, cloud, "left_arm", 0.3, 0.05)
+    wrist = JOINTS.index("left_wrist")
+    found, true = (forward_kinematics(pose, SHAPE)[0][wrist] for pose in (filt.estimate, hanging))
+    assert np.linalg.norm(found - true) < 0.08
+    others = [k for k in range(len(folded)) if k not in arm]
+    assert np.array_equal(filt.estimate[others], folded[others])
+    assert np.all(filt.particles[:, arm] == filt.estimate[arm])
+    assert len(filt.particles) == params.particles
 
 
 def test_an_arm_raised_and_seen_is_not_put_at_rest():
