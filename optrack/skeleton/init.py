@@ -454,7 +454,13 @@ def hang_arm(filt: SkeletonFilter, points: np.ndarray, arm: str, margin: float) 
 
 
 def rest_arm_again(
-    filt: SkeletonFilter, points: np.ndarray, arm: str, gain: float, slack: float
+    filt: SkeletonFilter,
+    points: np.ndarray,
+    arm: str,
+    gain: float,
+    slack: float,
+    particles: int = _HANG_PARTICLES,
+    layers: int | None = None,
 ) -> bool:
     """While tracking, :func:`hang_arm` the other way round: the arm annealed from rest is
     kept only where the whole body's likelihood (with the arms' collision prior) rises by
@@ -464,9 +470,10 @@ def rest_arm_again(
     an arm the data place stays (at rest, its points go unexplained). The limb's particles
     then all take the estimate and its velocity is forgotten; where the arm stays, the
     filter is left exactly as it was, its random numbers included. Returns whether the
-    arm was put at rest."""
+    arm was put at rest. The arm is annealed from rest over ``particles`` particles and
+    ``layers`` layers (None: ``init_layers``)."""
     found, saved = filt.estimate.copy(), filt.snapshot()
-    rest = _arm_from_rest(filt, points, arm)
+    rest = _arm_from_rest(filt, points, arm, particles, layers)
     filt.restore(saved)
     before, after = _scores(filt, points, found), _scores(filt, points, rest)
     if not (after[0] > before[0] + gain and after[1] > before[1] - slack):
@@ -478,9 +485,15 @@ def rest_arm_again(
     return True
 
 
-def _arm_from_rest(filt: SkeletonFilter, points: np.ndarray, arm: str) -> np.ndarray:
-    """The arm put at rest and annealed from there (``init_layers`` layers over
-    ``_HANG_PARTICLES`` particles, the rest of the body fixed); leaves the filter's particles
+def _arm_from_rest(
+    filt: SkeletonFilter,
+    points: np.ndarray,
+    arm: str,
+    particles: int = _HANG_PARTICLES,
+    layers: int | None = None,
+) -> np.ndarray:
+    """The arm put at rest and annealed from there (``layers`` layers, None: ``init_layers``,
+    over ``particles`` particles, the rest of the body fixed); leaves the filter's particles
     there and returns its estimate."""
     dims = list(PARTITIONS[arm])
     rest = filt.estimate.copy()
@@ -488,6 +501,7 @@ def _arm_from_rest(filt: SkeletonFilter, points: np.ndarray, arm: str) -> np.nda
     spread = np.zeros(D)
     spread[dims] = _REST_SPREAD
     filt.reset(rest, spread)
-    filt.particles = filt.particles[:_HANG_PARTICLES]
-    filt.anneal(points, arm, int(filt.params.init_layers), spread)
+    filt.particles = filt.particles[:particles]
+    layers = int(filt.params.init_layers) if layers is None else layers
+    filt.anneal(points, arm, layers, spread)
     return filt.estimate.copy()

@@ -177,5 +177,14 @@ def test_pausing_keeps_the_people_stepping_moves_them_and_resuming_keeps_their_i
     panel.pause_button.click()  # now "Resume"
     qtbot.waitUntil(lambda: not panel.paused and _played(window) > played + 0.1, timeout=30000)
     assert _position(window) > paused_at  # still in the same loop: nobody jumped back
-    playing = set(window.top_view.track_positions())
-    assert kept <= playing, (kept, playing)  # the same IDs go on
+    # The same IDs go on. Under load the view can miss a track for a frame (its node late
+    # with the first frames played), so gather what the view shows for a moment of play.
+    playing: set[int] = set()
+
+    def all_go_on() -> bool:
+        playing.update(window.top_view.track_positions())
+        return kept <= playing
+
+    with contextlib.suppress(qtbot.TimeoutError):  # the assertion below says what was seen
+        qtbot.waitUntil(all_go_on, timeout=2000)
+    assert kept <= playing, (kept, playing)
