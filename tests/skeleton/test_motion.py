@@ -217,22 +217,33 @@ def test_an_arm_folded_along_the_head_while_it_hangs_is_put_back_at_rest():
     assert _misplaced_arm(0.0) < 0.08
 
 
-def test_an_arm_tried_at_rest_while_tracking_stays_where_the_data_place_it():
-    rng = np.random.default_rng(16)
+def _wave_seen(rng: np.random.Generator, seed: int):
+    """A left arm raised overhead and seen by two sensors (a wave), and a filter on it."""
     truth = _pose(SHAPE)
-    arm = list(PARTITIONS["left_arm"])
-    truth[arm] = [2.8, 0.3, 0.0, 0.3]  # raised overhead and seen: a wave
+    truth[list(PARTITIONS["left_arm"])] = [2.8, 0.3, 0.0, 0.3]
     cloud = seen_cloud(truth, SHAPE, rng, sensors=2)
     params = SKELETON_PARAMS.create()
-    filt = SkeletonFilter(SHAPE, params, seed=8)
+    filt = SkeletonFilter(SHAPE, params, seed=seed)
     filt.reset(truth, motion_spread(params, 0.05))
+    return truth, cloud, params, filt
+
+
+def _assert_refused_and_left_alone(filt: SkeletonFilter, attempt) -> None:
+    """``attempt()`` says no and leaves the filter exactly as it was, its random numbers
+    too."""
     before, particles = filt.estimate.copy(), filt.particles.copy()
     stream = filt.rng.bit_generator.state
-    assert not rest_arm_again(filt, cloud, "left_arm", 0.3, 0.05)
-    # Left exactly as it was, its random numbers too.
+    assert not attempt()
     assert np.array_equal(filt.estimate, before)
     assert np.array_equal(filt.particles, particles)
     assert filt.rng.bit_generator.state == stream
+
+
+def test_an_arm_tried_at_rest_while_tracking_stays_where_the_data_place_it():
+    rng = np.random.default_rng(16)
+    truth, cloud, params, filt = _wave_seen(rng, seed=8)
+    arm = list(PARTITIONS["left_arm"])
+    _assert_refused_and_left_alone(filt, lambda: rest_arm_again(filt, cloud, "left_arm", 0.3, 0.05))
     # Hanging, while the estimate holds it folded along the head: put at rest, the rest
     # of the body untouched, every particle's arm on the estimate's.
     hanging = truth.copy()
@@ -253,19 +264,8 @@ def test_an_arm_tried_at_rest_while_tracking_stays_where_the_data_place_it():
 
 def test_an_arm_raised_and_seen_is_not_put_at_rest():
     rng = np.random.default_rng(15)
-    truth = _pose(SHAPE)
-    truth[list(PARTITIONS["left_arm"])] = [2.8, 0.3, 0.0, 0.3]  # raised overhead: a wave
-    cloud = seen_cloud(truth, SHAPE, rng, sensors=2)
-    params = SKELETON_PARAMS.create()
-    filt = SkeletonFilter(SHAPE, params, seed=7)
-    filt.reset(truth, motion_spread(params, 0.05))
-    before, particles = filt.estimate.copy(), filt.particles.copy()
-    stream = filt.rng.bit_generator.state
-    assert not hang_arm(filt, cloud, "left_arm", 0.2)
-    # Left exactly as it was, its random numbers too.
-    assert np.array_equal(filt.estimate, before)
-    assert np.array_equal(filt.particles, particles)
-    assert filt.rng.bit_generator.state == stream
+    truth, cloud, params, filt = _wave_seen(rng, seed=7)
+    _assert_refused_and_left_alone(filt, lambda: hang_arm(filt, cloud, "left_arm", 0.2))
     # Hanging, with the cloud showing it so, it is put at rest from overhead.
     hanging = truth.copy()
     hanging[list(PARTITIONS["left_arm"])] = [0.0, 0.1, 0.0, 0.3]
