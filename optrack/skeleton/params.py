@@ -274,6 +274,17 @@ SKELETON_PARAMS = register(
                 "in its first second, and an arm kept away from rest at the start.",
             ),
             Param(
+                "arm_rest_frames",
+                4,
+                min=0,
+                max=60,
+                step=1,
+                help="While tracking, every this many frames one arm, in turn, is tried "
+                "hanging at rest, kept where the whole body is clearly likelier so and the "
+                "data like it as well: an arm folded through the chest or along the head, "
+                "where no sensor sees it, hangs again (0: never).",
+            ),
+            Param(
                 "limb_check_s",
                 0.0,
                 min=0.0,

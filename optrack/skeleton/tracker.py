@@ -16,7 +16,7 @@ joints of optrack/skeleton/joints.py, a confidence per joint, and a state:
   ``limb_check_s`` (off by default) each limb, in turn, is checked about that often by
   a short search again, kept only where the whole body explains the cloud better (a
   limb held on points another part explains, an arm raised along the head while it
-  hangs, is found again); and every ``_REST_EVERY`` updates one arm in turn is tried
+  hangs, is found again); and every ``arm_rest_frames`` updates one arm in turn is tried
   hanging at rest, kept where the body with it there is clearly likelier and the data
   like it as well (init.py's ``rest_arm_again``: an arm folded through the chest or
   along the head, where no sensor sees it, hangs again);
@@ -126,7 +126,7 @@ _TURN_CYCLES = (2, 3)
 # whose headings were within 0.085 (median 0.40); a refused try leaves the filter
 # exactly as it was, so skipping the tries there changes nothing on those runs.
 _TURN_DOUBT = 0.2
-# While tracking, every this many updates one arm in turn is tried at rest (init.py's
+# While tracking, every arm_rest_frames updates one arm in turn is tried at rest (init.py's
 # rest_arm_again), kept where the whole body's log-likelihood rises by more than _REST_GAIN
 # and the data's falls by no more than _REST_SLACK. With two sensors an arm the limbs'
 # searches folded along the head or through the chest stayed there for the rest of the
@@ -135,7 +135,6 @@ _TURN_DOUBT = 0.2
 # was more than 0.2 m nearer the truth gained 0.68 in the median (the prior's cost of the
 # folded arm), 19 of them over 0.3 with the data within 0.05; of the 254 where rest was
 # more than 0.2 m further off (arms raised in the jumping jacks), 15 passed both.
-_REST_EVERY = 4
 _REST_GAIN = 0.3
 _REST_SLACK = 0.05
 # The arm is annealed from rest over this many particles and layers: half the
@@ -278,7 +277,7 @@ class SkeletonTracker:
         limbs' searches (``_TURN_CYCLES``), the whole body is also tried turned round
         (``turn_around``, the same margin: several frames' work, so only while a start's
         front and back are in doubt, and only after a start whose two headings scored within
-        ``_TURN_DOUBT`` of each other). While tracking, every ``_REST_EVERY`` updates, one
+        ``_TURN_DOUBT`` of each other). While tracking, every ``arm_rest_frames`` updates, one
         arm in turn is tried at rest (``rest_arm_again``). Returns whether a limb moved."""
         chosen = []
         researching = stamp - self._started < float(self.params.limb_research_s)
@@ -310,8 +309,9 @@ class SkeletonTracker:
             and self._heading_margin < _TURN_DOUBT
         ):
             moved |= turn_around(self.filter, points, margin)
-        if self.state == "tracking" and self._updates % _REST_EVERY == 0:
-            arm = LIMBS[(self._updates // _REST_EVERY) % 2]
+        every = int(self.params.arm_rest_frames)
+        if self.state == "tracking" and every > 0 and self._updates % every == 0:
+            arm = LIMBS[(self._updates // every) % 2]
             moved |= rest_arm_again(
                 self.filter, points, arm, _REST_GAIN, _REST_SLACK, _REST_PARTICLES, _REST_LAYERS
             )

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from optrack.skeleton import tracker as tracker_module
 from optrack.skeleton.filter import SkeletonFilter, motion_spread
 from optrack.skeleton.init import _reach, hang_arm, rest_arm_again, swap_legs, turn_around
 from optrack.skeleton.joints import JOINTS, MARKERS
@@ -177,7 +176,7 @@ def test_a_found_limb_stays_through_the_searches_after_initialisation():
     assert max(worst) < 0.1, worst
 
 
-def _misplaced_arm(check_s: float, seed: int = 9) -> float:
+def _misplaced_arm(check_s: float, seed: int = 9, arm_rest_frames: int = 4) -> float:
     """Right wrist error (m) 1.5 s after a tracked person's right arm, hanging at their
     side, was put overhead in the estimate (on the head's and the chest's points: the walk
     clip held it so for seconds, its bones' support at 0.5-1)."""
@@ -185,6 +184,7 @@ def _misplaced_arm(check_s: float, seed: int = 9) -> float:
     params = SKELETON_PARAMS.create(
         {
             "limb_check_s": check_s,
+            "arm_rest_frames": arm_rest_frames,
             "limb_research_s": 0.0,
             "shape_seconds": 0.0,
             "particles": 1000,
@@ -206,10 +206,10 @@ def _misplaced_arm(check_s: float, seed: int = 9) -> float:
     )
 
 
-def test_a_limb_on_wrong_points_is_found_by_the_periodic_check(monkeypatch):
-    monkeypatch.setattr(tracker_module, "_REST_EVERY", 10**9)  # no arm tried at rest
-    assert _misplaced_arm(0.0) > 0.3  # tracking alone leaves it overhead
-    assert _misplaced_arm(0.5) < 0.08
+def test_a_limb_on_wrong_points_is_found_by_the_periodic_check():
+    # No arm tried at rest (arm_rest_frames 0): tracking alone leaves it overhead.
+    assert _misplaced_arm(0.0, arm_rest_frames=0) > 0.3
+    assert _misplaced_arm(0.5, arm_rest_frames=0) < 0.08
 
 
 def test_an_arm_folded_along_the_head_while_it_hangs_is_put_back_at_rest():
