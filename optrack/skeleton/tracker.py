@@ -128,8 +128,8 @@ _TURN_CYCLES = (2, 3)
 _TURN_DOUBT = 0.2
 # ... and kept where the data's log-likelihood of the body turned round beats the body as
 # found by more than this (both refined alike), not limb_research_margin's 0.2: the jumps'
-# start facing backwards (two sensors, seeds 5 and 33) was turned round by 0.087 and then
-# refused, and stayed backwards for 2.5 s (0.25 m over the run). Two sensors, six clips:
+# start facing backwards (two sensors, seed 5) was turned round by 0.087 and then refused,
+# and stayed backwards for 2.5 s (0.25 m over the run; seed 33 alike). Two sensors, six clips:
 # seeds 0-23 0.0669 -> 0.0657 m, held-out seeds 24-47 0.0659 -> 0.0647 m; 5 runs of 288
 # changed, each for the better (docs/skeleton.md, "Why the defaults: the turn's margin").
 _TURN_MARGIN = 0.05
