@@ -242,7 +242,7 @@ class SiteLab:
 
     def tracker_pid(self) -> int:
         """The tracker node's process on ``trk``, as its launcher's ``site`` status names it
-        (a node restarted from the launcher's standby process keeps that one's command)."""
+        (every node is a fork of the launcher's fork server, which has that one's command)."""
         assert self.watcher is not None
         named = [e for e in self.watcher.select("status") if "pid.tracker" in e["values"]]
         pid = int(named[-1]["values"]["pid.tracker"]) if named else 0

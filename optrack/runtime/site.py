@@ -3,7 +3,8 @@
 The launcher hosts the site's bus hub (a Zenoh router on
 ``tcp/127.0.0.1:<bus.local_port>``, loopback only), then starts as child
 processes one detector node per sensor and the tracker node, which sends the
-outputs itself, all connecting to the hub. Without ``site.sensors`` the
+outputs itself, all connecting to the hub. Each node is forked from one fork
+server that imported what nodes need once (:mod:`optrack.runtime.starter`). Without ``site.sensors`` the
 sensors are the embedded venue: the simulated ``site.scenario`` (``mixed``:
 three Kinect v2, four to six people), each sensor rendered live by its
 detector node (``sim://``, :func:`optrack.runtime.venue.venue_uris`), every
@@ -20,7 +21,6 @@ has not ended after ``site.stop_timeout_s``.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import os
 import shutil
@@ -42,6 +42,7 @@ from optrack.params import Params, save_config
 from optrack.runtime.config import NodeConfig, state_dir
 from optrack.runtime.display import display_problem
 from optrack.runtime.node import PARENT_ENV
+from optrack.runtime.starter import NodeProcess, NodeStarter
 from optrack.runtime.venue import venue_uris
 
 __all__ = ["Child", "Site", "SiteError"]
@@ -63,7 +64,7 @@ class Child:
     role: str  # detector, tracker, gui (outputs: a separate outputs process)
     module: str
     args: list[str]
-    process: subprocess.Popen[bytes] | None = None
+    process: subprocess.Popen[bytes] | NodeProcess | None = None
     state: str = "new"  # running, waiting (to restart), ended, stopped
     started_at: float = 0.0
     restart_at: float = 0.0
@@ -141,7 +142,7 @@ class Site:
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._run_dir: Path | None = None
-        self._standby: subprocess.Popen[bytes] | None = None
+        self._starter: NodeStarter | None = None
         self.operator: Any = None  # the simulated operator (calibration wizard), if simulated
         self._receivers: dict[str, tuple[str, int]] = {}  # destination -> (said, errors then)
         self._venue_sensors = False  # the sensors are the embedded venue
@@ -250,44 +251,37 @@ class Site:
         args = ["--site", self.name, "--config", str(config)]
         return Child("skeleton", "skeleton", "optrack.runtime.skeleton_node", args)
 
-    def _popen(self, argv: list[str], stdin: int) -> subprocess.Popen[bytes]:
-        env = dict(os.environ)
-        env[PARENT_ENV] = str(os.getpid())
-        env["PYTHONUNBUFFERED"] = "1"
-        # Each node is its own process: OpenBLAS's threads per node (as many as cores)
-        # would only spin against the other nodes (a 640x480 transform: 40 ms of CPU).
-        env.setdefault("OPENBLAS_NUM_THREADS", "1")
+    def _node_env(self) -> dict[str, str]:
+        """What a node's environment adds to the launcher's."""
+        return {
+            PARENT_ENV: str(os.getpid()),
+            "PYTHONUNBUFFERED": "1",
+            # Each node is its own process: OpenBLAS's threads per node (as many as cores)
+            # would only spin against the other nodes (a 640x480 transform: 40 ms of CPU).
+            "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1"),
+        }
+
+    def _popen(self, argv: list[str]) -> subprocess.Popen[bytes]:
         return subprocess.Popen(
             argv,
-            stdin=stdin,
+            stdin=subprocess.DEVNULL,
             stdout=sys.stderr.fileno(),
             stderr=sys.stderr.fileno(),
-            env=env,
+            env={**os.environ, **self._node_env()},
             start_new_session=True,  # Ctrl-C reaches the launcher only; it stops the nodes
         )
 
-    def _spawn_standby(self) -> None:
-        self._standby = self._popen(
-            [sys.executable, "-m", "optrack.runtime.standby"], subprocess.PIPE
-        )
-
-    def _spawn(self, child: Child, standby: bool = False) -> None:
-        """Start a child; ``standby``: hand it to the waiting standby process (imports
-        done) and start a new standby."""
-        process = None
-        if standby and self._standby is not None and self._standby.poll() is None:
-            process, self._standby = self._standby, None
-            order = json.dumps({"module": child.module, "args": child.args}) + "\n"
-            try:
-                assert process.stdin is not None
-                process.stdin.write(order.encode("utf-8"))
-                process.stdin.close()
-            except OSError:  # the standby died meanwhile
-                process = None
+    def _spawn(self, child: Child) -> None:
+        """Start a child: a node forked from the fork server (imports done,
+        :mod:`optrack.runtime.starter`), the window as its own process."""
+        process: subprocess.Popen[bytes] | NodeProcess | None = None
+        if child.role != "gui":
+            if self._starter is None:
+                self._starter = NodeStarter(self._node_env())
+                self._starter.prepare()
+            process = self._starter.start(child.name, child.module, child.args)
         if process is None:
-            process = self._popen(child.argv, subprocess.DEVNULL)
-        if standby:
-            self._spawn_standby()
+            process = self._popen(child.argv)
         child.process = process
         child.state = "running"
         child.started_at = time.monotonic()
@@ -308,6 +302,9 @@ class Site:
     def start(self) -> None:
         """Host the hub, render/prepare the sensors (progress in the site status), start
         every node."""
+        if self._starter is None:  # its imports run while the hub starts
+            self._starter = NodeStarter(self._node_env())
+            self._starter.prepare()
         self.host()
         uris = self.sensor_uris()
         self._run_dir = Path(tempfile.mkdtemp(prefix="optrack-run-"))
@@ -324,7 +321,6 @@ class Site:
             for child in self.children:
                 if child.role == role:
                     self._spawn(child)
-        self._spawn_standby()
         log.info(
             "site '%s' on tcp/127.0.0.1:%d: %d detector node(s), tracker with outputs (%s)",
             self.name,
@@ -358,7 +354,7 @@ class Site:
             return
         child = self._skeleton_child(self._run_dir / "skeleton.yaml")
         self.children.append(child)
-        self._spawn(child, standby=True)
+        self._spawn(child)
         log.info("the skeleton stage is on: started the skeleton node (pid %s).", child.pid)
 
     # ------------------------------------------------- the simulated operator
@@ -412,7 +408,7 @@ class Site:
                 )
                 self.publish_status()
             elif child.state == "waiting" and now >= child.restart_at:
-                self._spawn(child, standby=child.role != "gui")
+                self._spawn(child)
                 child.restarts += 1
                 log.info(
                     "restarted %s (restart %d, pid %s).", child.label, child.restarts, child.pid
@@ -523,12 +519,6 @@ class Site:
         for child in self.children:
             if child.state in ("running", "waiting"):
                 child.state = "stopped"
-        standby, self._standby = self._standby, None
-        if standby is not None:
-            standby.terminate()  # nothing to clean up: it was only importing or waiting
-            standby.wait()
-            if standby.stdin is not None:
-                standby.stdin.close()
         if self.hub is not None:
             try:
                 self.publish_status()

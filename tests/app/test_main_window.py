@@ -3,6 +3,7 @@
 import os
 import subprocess
 import sys
+import time
 
 import msgspec
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 import yaml
 from PySide6.QtGui import QImage
 
+from optrack.bench.site_process import descendants
 from optrack.geometry import make_pose
 from optrack.types import (
     Detection,
@@ -120,23 +122,49 @@ def test_view_parameters_change_the_window_not_the_nodes(qtbot, window):
 
 
 def test_optrack_gui_starts_its_site_takes_a_screenshot_and_quits(tmp_path, site_config):
-    """The default: the window starts the embedded site; quitting stops it, exit status 0."""
+    """The default: the window starts the embedded site; quitting stops it, exit status 0,
+    and every process the site started (its nodes, the fork server) has ended."""
     shot = tmp_path / "window.png"
     optrack = os.path.join(os.path.dirname(sys.executable), "optrack")
-    result = subprocess.run(
-        [optrack, "gui", "--config", str(site_config), "--screenshot", str(shot)]
-        + ["--quit-after", "3"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert result.returncode == 0, result.stderr
+    stderr = tmp_path / "stderr.txt"
+    with stderr.open("w") as err:
+        process = subprocess.Popen(
+            [optrack, "gui", "--config", str(site_config), "--screenshot", str(shot)]
+            + ["--quit-after", "3"],
+            stdout=subprocess.DEVNULL,
+            stderr=err,
+        )
+        names: dict[int, str] = {}  # every process the site started, by its name
+        deadline = time.monotonic() + 120
+        while process.poll() is None and time.monotonic() < deadline:
+            for pid in descendants(process.pid):
+                names[pid] = _comm(pid) if _alive(pid) else names.get(pid, "?")
+            time.sleep(0.1)
+        code = process.wait(max(0.0, deadline - time.monotonic()))
+    assert code == 0, stderr.read_text()
     image = QImage(str(shot))
     assert (image.width(), image.height()) == (1280, 800)
     pixels = image_array(image)
     assert len(np.unique(pixels.reshape(-1, 3), axis=0)) > 10
-    leftover = subprocess.run(["pgrep", "-f", str(site_config)], capture_output=True, text=True)
-    assert leftover.stdout == "", "the embedded site's processes outlived the window"
+    assert {"tracker", "kinect2_0"} <= set(names.values()), names  # the site's nodes ran
+    leftover = {pid: name for pid, name in names.items() if _alive(pid)}
+    assert not leftover, f"the embedded site's processes outlived the window: {leftover}"
+
+
+def _comm(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/comm") as comm:
+            return comm.read().strip()
+    except FileNotFoundError:
+        return "?"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
 
 
 def test_optrack_gui_without_a_site(tmp_path):

@@ -100,7 +100,7 @@ def test_node_figures_are_growth_over_the_window_and_cpu_by_role():
 
 
 def test_cpu_is_by_node_with_every_other_process_of_the_launcher_as_launcher():
-    before = {10: 1.0, 11: 0.5, 20: 3.0, 30: 2.0}  # launcher, its standby, a detector, tracker
+    before = {10: 1.0, 11: 0.5, 20: 3.0, 30: 2.0}  # launcher, its fork server, a detector, tracker
     after = {10: 1.5, 11: 0.75, 20: 7.0}  # the tracker ended (restarted): not counted
     names = {20: "cam0", 30: "tracker"}
     assert _cpu_by_name(before, after, names) == {"launcher": 0.75, "cam0": 4.0, "tracker": 0.0}
