@@ -147,6 +147,11 @@ def test_optrack_gui_starts_its_site_takes_a_screenshot_and_quits(tmp_path, site
     pixels = image_array(image)
     assert len(np.unique(pixels.reshape(-1, 3), axis=0)) > 10
     assert {"tracker", "kinect2_0"} <= set(names.values()), names  # the site's nodes ran
+    # The fork server and multiprocessing's resource tracker end when the launcher does
+    # (their pipe from it closes), then tear their imports down (0.4 s on a quiet computer).
+    deadline = time.monotonic() + 5.0
+    while any(_alive(pid) for pid in names) and time.monotonic() < deadline:
+        time.sleep(0.05)
     leftover = {pid: name for pid, name in names.items() if _alive(pid)}
     assert not leftover, f"the embedded site's processes outlived the window: {leftover}"
 
