@@ -251,15 +251,19 @@ class Site:
         args = ["--site", self.name, "--config", str(config)]
         return Child("skeleton", "skeleton", "optrack.runtime.skeleton_node", args)
 
-    def _node_env(self) -> dict[str, str]:
-        """What a node's environment adds to the launcher's."""
+    @staticmethod
+    def _server_env() -> dict[str, str]:
+        """What the nodes' environment has for the libraries they load."""
         return {
-            PARENT_ENV: str(os.getpid()),
             "PYTHONUNBUFFERED": "1",
             # Each node is its own process: OpenBLAS's threads per node (as many as cores)
             # would only spin against the other nodes (a 640x480 transform: 40 ms of CPU).
             "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1"),
         }
+
+    def _node_env(self) -> dict[str, str]:
+        """What a node's environment adds to the launcher's."""
+        return {PARENT_ENV: str(os.getpid()), **self._server_env()}
 
     def _popen(self, argv: list[str]) -> subprocess.Popen[bytes]:
         return subprocess.Popen(
@@ -277,7 +281,7 @@ class Site:
         process: subprocess.Popen[bytes] | NodeProcess | None = None
         if child.role != "gui":
             if self._starter is None:
-                self._starter = NodeStarter(self._node_env())
+                self._starter = NodeStarter(self._node_env(), self._server_env())
                 self._starter.prepare()
             process = self._starter.start(child.name, child.module, child.args)
         if process is None:
@@ -303,7 +307,7 @@ class Site:
         """Host the hub, render/prepare the sensors (progress in the site status), start
         every node."""
         if self._starter is None:  # its imports run while the hub starts
-            self._starter = NodeStarter(self._node_env())
+            self._starter = NodeStarter(self._node_env(), self._server_env())
             self._starter.prepare()
         self.host()
         uris = self.sensor_uris()

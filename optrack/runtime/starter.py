@@ -29,7 +29,7 @@ import os
 import signal
 import subprocess
 import sys
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 
 from optrack.runtime.node import PARENT_ENV
 
@@ -93,41 +93,30 @@ def _run_node(name: str, module: str, args: list[str], env: dict[str, str]) -> N
     sys.exit(int(code or 0))
 
 
-@contextlib.contextmanager
-def _environment(values: Mapping[str, str]) -> Iterator[None]:
-    saved = {key: os.environ.get(key) for key in values}
-    os.environ.update(values)
-    try:
-        yield
-    finally:
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
-
-
 class NodeStarter:
     """Starts nodes forked from the fork server (see the module docstring).
 
-    ``env``: what every node's environment has on top of the launcher's (and the fork
-    server's too, for what a library reads when it loads, such as
-    ``OPENBLAS_NUM_THREADS``)."""
+    ``env``: what every node's environment has on top of the launcher's. ``server_env``:
+    what the fork server's has, for what a library reads once when it loads (such as
+    ``OPENBLAS_NUM_THREADS``); :meth:`prepare` sets it in the launcher's own environment,
+    once, so that a fork server started again later has it too."""
 
-    def __init__(self, env: Mapping[str, str]) -> None:
+    def __init__(self, env: Mapping[str, str], server_env: Mapping[str, str]) -> None:
         self.env = dict(env)
+        self.server_env = dict(server_env)
         self._context = multiprocessing.get_context("forkserver")
         self._failed = False
 
     def prepare(self) -> None:
         """Start the fork server now: it imports while the launcher sets up the hub. The
-        first :meth:`start` waits for its imports to end."""
+        first :meth:`start` waits for its imports to end. Call it before the launcher
+        starts threads: it changes the launcher's environment."""
         from multiprocessing import forkserver
 
+        os.environ.update(self.server_env)
         self._context.set_forkserver_preload([PRELOAD])
         try:
-            with _environment(self.env):
-                forkserver.ensure_running()
+            forkserver.ensure_running()
         except (OSError, ValueError) as error:
             self._fail(error)
 
@@ -150,8 +139,7 @@ class NodeStarter:
             target=_run_node, args=(name, module, list(args), env), name=name, daemon=True
         )
         try:
-            with _environment(self.env):  # for a fork server (re)started here
-                process.start()
+            process.start()
         except (OSError, EOFError, ValueError) as error:
             self._fail(error)
             return None

@@ -21,7 +21,7 @@ MODULE = "tests.runtime.starter_node"
 
 @pytest.fixture(scope="module")
 def starter() -> NodeStarter:
-    starter = NodeStarter({"OPTRACK_TEST_ADDED": "yes"})
+    starter = NodeStarter({"OPTRACK_TEST_ADDED": "yes"}, {"OPENBLAS_NUM_THREADS": "1"})
     starter.prepare()
     return starter
 
@@ -47,6 +47,7 @@ def test_a_node_runs_with_the_imports_done_in_the_launchers_environment(
     assert found["imported"]  # the fork server's imports: the node imports nothing more
     assert found["environ"]["OPTRACK_TEST_LATER"] == "set after the fork server started"
     assert found["environ"]["OPTRACK_TEST_ADDED"] == "yes"
+    assert found["environ"]["OPENBLAS_NUM_THREADS"] == "1"  # the fork server's too
     assert found["environ"][PARENT_ENV] == str(found["ppid"])  # the fork server
     assert found["ppid"] != os.getpid() and found["pid"] == node.pid
     assert found["sid"] == node.pid  # its own session: Ctrl-C is the launcher's
