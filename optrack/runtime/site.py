@@ -275,15 +275,19 @@ class Site:
             start_new_session=True,  # Ctrl-C reaches the launcher only; it stops the nodes
         )
 
+    def _node_starter(self) -> NodeStarter:
+        """The fork server's starter, started on first use."""
+        if self._starter is None:
+            self._starter = NodeStarter(self._node_env(), self._server_env())
+            self._starter.prepare()
+        return self._starter
+
     def _spawn(self, child: Child) -> None:
         """Start a child: a node forked from the fork server (imports done,
         :mod:`optrack.runtime.starter`), the window as its own process."""
         process: subprocess.Popen[bytes] | NodeProcess | None = None
         if child.role != "gui":
-            if self._starter is None:
-                self._starter = NodeStarter(self._node_env(), self._server_env())
-                self._starter.prepare()
-            process = self._starter.start(child.name, child.module, child.args)
+            process = self._node_starter().start(child.name, child.module, child.args)
         if process is None:
             process = self._popen(child.argv)
         child.process = process
@@ -306,9 +310,7 @@ class Site:
     def start(self) -> None:
         """Host the hub, render/prepare the sensors (progress in the site status), start
         every node."""
-        if self._starter is None:  # its imports run while the hub starts
-            self._starter = NodeStarter(self._node_env(), self._server_env())
-            self._starter.prepare()
+        self._node_starter()  # its imports run while the hub starts
         self.host()
         uris = self.sensor_uris()
         self._run_dir = Path(tempfile.mkdtemp(prefix="optrack-run-"))
