@@ -30,3 +30,7 @@ def main(args: list[str]) -> int:
         signal.signal(signal.SIGTERM, lambda number, frame: sys.exit(3))
         time.sleep(60)
     return int(action) if action.isdigit() else 0
+
+
+if __name__ == "__main__":  # started as `python -m` (the launcher without its fork server)
+    sys.exit(main(sys.argv[1:]))

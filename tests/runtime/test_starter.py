@@ -8,6 +8,7 @@ import json
 import os
 import signal
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -76,3 +77,37 @@ def test_its_exit_status_and_signals_are_those_of_a_process(starter, tmp_path):
     node.kill()
     assert node.wait(30) == -signal.SIGKILL
     node.kill()  # an ended node: nothing to signal, no error
+
+
+# A launcher whose fork server cannot start (its interpreter is missing): the launcher says
+# so once, in one sentence, and starts each node as its own `python -m` process instead.
+FALLBACK = """
+import logging, multiprocessing, sys
+logging.basicConfig(level=logging.INFO, format="%(message)s")
+multiprocessing.set_executable("/nonexistent/python3")
+from optrack.runtime.config import load_node_config
+from optrack.runtime.site import Child, Site
+site = Site(load_node_config(None, {"site": {"name": "fallback"}}))
+for name in ("one", "two"):
+    child = Child(name, "detector", sys.argv[1], [sys.argv[2] + "/" + name + ".json", "5"])
+    site._spawn(child)
+    print(name, type(child.process).__name__, child.process.wait(60), flush=True)
+"""
+
+
+def test_without_its_fork_server_the_launcher_says_so_and_starts_each_node_itself(tmp_path):
+    root = Path(__file__).resolve().parents[2]
+    result = subprocess.run(
+        [sys.executable, "-c", FALLBACK, MODULE, str(tmp_path)],
+        cwd=root, capture_output=True, text=True, timeout=180,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split("\n")[:2] == ["one Popen 5", "two Popen 5"]
+    said = [line for line in result.stderr.splitlines() if "fork server did not start" in line]
+    assert len(said) == 1, result.stderr  # once, not per node
+    assert said[0].endswith("each node starts as its own Python process, which takes longer.")
+    for name in ("one", "two"):  # each ran as a process of its own, with the launcher's env
+        found = _report(tmp_path / f"{name}.json")
+        assert not found["imported"] and found["sid"] == found["pid"]
+        assert found["environ"][PARENT_ENV] == str(found["ppid"])
+        assert found["environ"]["OPENBLAS_NUM_THREADS"] == "1"
