@@ -318,8 +318,12 @@ def sorted_points_numpy(points: np.ndarray, baseline: np.ndarray | None) -> tupl
 
 
 def set_threads(threads: int) -> None:
-    """How many CPU threads numba's parallel loops share their poses among."""
-    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    """How many CPU threads numba's parallel loops share their poses among (0: as many as
+    :func:`~optrack.skeleton.cores.auto_threads` says are spare now)."""
+    from optrack.skeleton.cores import auto_threads
+
+    count = auto_threads() if int(threads) == 0 else int(threads)
+    numba.set_num_threads(max(1, min(count, numba.config.NUMBA_NUM_THREADS)))
 
 
 def log_likelihood(

@@ -94,12 +94,12 @@ SKELETON_PARAMS = register(
             ),
             Param(
                 "threads",
-                1,
-                min=1,
+                0,
+                min=0,
                 max=64,
                 step=1,
-                help="CPU threads the likelihood shares its particles among (more helps only "
-                "where cores are idle).",
+                help="CPU threads the likelihood shares its particles among (0: auto, the "
+                "cores no other process keeps busy; more helps only where cores are idle).",
             ),
             Param(
                 "torso_points",

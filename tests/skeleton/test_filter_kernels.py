@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from optrack.skeleton.filter import _take_and_diffuse, systematic_resample
+from optrack.skeleton.filter import _take_and_diffuse, exp_nonpositive, systematic_resample
 from optrack.skeleton.kernels import limb_points, limb_points_numpy, nearest_areas
 from optrack.skeleton.likelihood import associate
 from optrack.skeleton.model import (
@@ -31,6 +31,26 @@ def test_systematic_resampling_equals_numpys_searchsorted(seed):
     cumulative = np.cumsum(weights)
     cumulative[-1] = 1.0
     np.testing.assert_array_equal(fast, np.searchsorted(cumulative, positions))
+
+
+def test_the_weights_exp_equals_numpys():
+    """The annealing weights' exp (a loop that vectorises) against numpy's, over the
+    range it is used on: 0 exactly 1, under -700 held at exp(-700), positive as 0."""
+    rng = np.random.default_rng(5)
+    x = np.concatenate(
+        [
+            [0.0, -0.0, -1e-300, -np.log(2.0), -0.5 * np.log(2.0), -700.0],
+            -rng.exponential(3.0, 2000),
+        ]
+    )
+    x = np.concatenate([x, -rng.uniform(0.0, 700.0, 2000)])
+    out = np.empty_like(x)
+    exp_nonpositive(x, out)
+    np.testing.assert_allclose(out, np.exp(x), rtol=4e-16, atol=0.0)
+    assert out[0] == 1.0 and out[1] == 1.0
+    beyond = np.array([-701.0, -1e6, 3.0])
+    exp_nonpositive(beyond, out[:3])
+    np.testing.assert_array_equal(out[:3], [np.exp(-700.0), np.exp(-700.0), 1.0])
 
 
 @pytest.mark.parametrize("diffuse", [True, False])
