@@ -32,7 +32,10 @@ and a digest of the simulator's code).
   0); both leave out each run's first frame (initialisation, and numba's compilation);
   ``ms_per_frame_p50``/``_p95`` are of one person's frames with three
   sensors (wall time), ``cpu_ms_per_frame_p50`` the CPU time of those frames
-  (every thread's): on a loaded machine the better guide. The machine's load
+  (every thread's): on a loaded machine the better guide. ``threads`` is the
+  ``skeleton.threads`` setting (0: auto, the default: the cores no other process
+  keeps busy, :mod:`optrack.skeleton.cores`), ``threads_used`` what it gave at the
+  end of the speed runs (the bench runs nothing else then). The machine's load
   average is reported beside them, and ``reference_ms``: this computer's speed as
   the stage sees it, the CPU time of one fixed full-body likelihood
   (:func:`reference_ms`), the mean of its timings before and after the speed runs. A
@@ -65,6 +68,7 @@ from optrack.evaluation.skeleton import (
 )
 from optrack.params import Params
 from optrack.recording import Recording
+from optrack.skeleton.cores import auto_threads
 from optrack.skeleton.fusion import FUSION_PARAMS
 from optrack.skeleton.params import SKELETON_PARAMS
 
@@ -290,6 +294,8 @@ def skeleton_bench(
     before = reference_ms()
     alone = _run(recordings[Path(clips[0]).stem], 3, "speed, one person", 0, stages)
     four = _run(crowd, 3, "speed, four people", 0, stages)
+    # The threads the kernels used: the setting, or what auto gave at the runs' end.
+    threads = int(skeleton.threads) if int(skeleton.threads) > 0 else auto_threads()
     after = reference_ms()
     skip = 1 if len(alone.frame_ms) > 1 else 0
     steady, cpu = alone.frame_ms[skip:], alone.frame_cpu_ms[skip:]
@@ -300,6 +306,8 @@ def skeleton_bench(
         "ms_per_frame_p95": round(float(np.percentile(steady, 95)), 1),
         "cpu_ms_per_frame_p50": round(float(np.percentile(cpu, 50)), 1),
         "particles": int(skeleton.particles),
+        "threads": int(skeleton.threads),
+        "threads_used": threads,
         "points_per_person": int(fusion.points),
         "points_per_person_mean": round(float(np.mean(alone.points)), 1),
         "accuracy": _accuracy(runs),

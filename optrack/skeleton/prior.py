@@ -28,7 +28,7 @@ import numba
 import numpy as np
 
 from optrack.params import Params
-from optrack.skeleton.kernels import LANES, fk_lanes, point_distance
+from optrack.skeleton.kernels import GROUPS, LANES, fk_lanes, point_distance
 from optrack.skeleton.model import (
     FK_TABLES,
     FRAMES,
@@ -51,7 +51,7 @@ _ARMS = {
 }
 
 
-@numba.njit(cache=True, fastmath=True)
+@numba.njit(parallel=True, cache=True, fastmath=True)
 def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, frames_on, points_on, ends,
             body, margins, tables):  # fmt: skip
     """For each particle (P, D), the arm's summed depth inside the ``body`` rows (K, G):
@@ -60,37 +60,43 @@ def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, frames_on, p
     and sines ``cos``, ``sin``, (P, len(dims))), the rest of the pose as in
     ``base_rot``/``base_pts``; ``margins`` (K,): the depth each row lets them reach free.
     The kinematics of ``LANES`` particles at once (:func:`fk_lanes`, only the frames
-    ``frames_on`` and their points ``points_on``)."""
+    ``frames_on`` and their points ``points_on``); threads share groups of them (each
+    particle alone: the same numbers with any count of threads)."""
     n = particles.shape[0]
     out = np.zeros(n)
-    xs = np.zeros((D, LANES))
-    cs, sn = np.zeros((D, LANES), np.float32), np.zeros((D, LANES), np.float32)
-    rot = np.empty(base_rot.shape + (LANES,))
-    pts = np.empty(base_pts.shape + (LANES,))
-    for lane in range(LANES):
-        rot[..., lane] = base_rot
-        pts[..., lane] = base_pts
-    tested = np.empty((3, LANES, 3))  # the elbow, the forearm's middle, the wrist
-    for first in range(0, n, LANES):
-        lanes = min(LANES, n - first)
-        for j in range(dims.shape[0]):
+    chunks = (n + LANES - 1) // LANES
+    groups = min(chunks, GROUPS)
+    for group in numba.prange(groups):  # scratch made once per group of chunks
+        xs = np.zeros((D, LANES))
+        cs, sn = np.zeros((D, LANES), np.float32), np.zeros((D, LANES), np.float32)
+        rot = np.empty(base_rot.shape + (LANES,))
+        pts = np.empty(base_pts.shape + (LANES,))
+        for lane in range(LANES):
+            rot[..., lane] = base_rot
+            pts[..., lane] = base_pts
+        tested = np.empty((3, LANES, 3))  # the elbow, the forearm's middle, the wrist
+        for c in range(group * chunks // groups, (group + 1) * chunks // groups):
+            first = c * LANES
+            lanes = min(LANES, n - first)
+            for j in range(dims.shape[0]):
+                d = dims[j]
+                for lane in range(lanes):
+                    xs[d, lane] = particles[first + lane, d]
+                    cs[d, lane], sn[d, lane] = cos[first + lane, j], sin[first + lane, j]
+            fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, tables)
             for lane in range(lanes):
-                xs[dims[j], lane] = particles[first + lane, dims[j]]
-                cs[dims[j], lane], sn[dims[j], lane] = cos[first + lane, j], sin[first + lane, j]
-        fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, tables)
-        for lane in range(lanes):
-            for r in range(3):
-                elbow, wrist = pts[ends[0], r, lane], pts[ends[1], r, lane]
-                tested[0, lane, r], tested[2, lane, r] = elbow, wrist
-                tested[1, lane, r] = 0.5 * (elbow + wrist)
-            total = 0.0
-            for q in range(3):
-                deepest = 0.0  # how far inside a part beyond the margin, in its radii
-                for k in range(body.shape[0]):
-                    depth = -point_distance(tested[q], lane, body[k])[0] - margins[k]
-                    deepest = max(deepest, depth)
-                total += deepest
-            out[first + lane] = total
+                for r in range(3):
+                    elbow, wrist = pts[ends[0], r, lane], pts[ends[1], r, lane]
+                    tested[0, lane, r], tested[2, lane, r] = elbow, wrist
+                    tested[1, lane, r] = 0.5 * (elbow + wrist)
+                total = 0.0
+                for q in range(3):
+                    deepest = 0.0  # how far inside a part beyond the margin, in its radii
+                    for k in range(body.shape[0]):
+                        depth = -point_distance(tested[q], lane, body[k])[0] - margins[k]
+                        deepest = max(deepest, depth)
+                    total += deepest
+                out[first + lane] = total
     return out
 
 

@@ -29,6 +29,8 @@ def test_bench_skeleton_keys_on_a_few_frames(shared_data, tmp_path, monkeypatch)
     result = skeleton_bench(seconds=0.2, clips=(clip,), speed_seconds=0.1, seeds=2, jobs=2)
     assert KEYS <= set(result)
     assert result["particles"] == 2000 and result["points_per_person"] == 500
+    # Auto threads by default: what it gave is a count of this machine's cores.
+    assert result["threads"] == 0 and 1 <= result["threads_used"] <= result["cpu_count"]
     for key in (
         "fps_1person_3sensors",
         "fps_4people_3sensors",

@@ -7,7 +7,7 @@ import pytest
 
 from optrack.skeleton.filter import SkeletonFilter
 from optrack.skeleton.init import pose_log_likelihood
-from optrack.skeleton.likelihood import signed_distance
+from optrack.skeleton.likelihood import set_threads, signed_distance
 from optrack.skeleton.model import (
     PART_INDEX,
     POINTS,
@@ -77,10 +77,16 @@ def test_the_kernel_matches_the_definition_on_random_arms(seed):
     estimate[6:9] = rng.uniform(-0.3, 0.3, 3)  # a bent spine
     particles = np.tile(estimate, (300, 1))
     particles[:, LEFT_ARM] = rng.uniform([-1.0, -0.6, -1.5, 0.0], [3.1, 3.0, 1.5, 2.6], (300, 4))
-    costs = ArmCollision(estimate, "left_arm", SHAPE, PARAMS)(particles)
+    prior = ArmCollision(estimate, "left_arm", SHAPE, PARAMS)
+    set_threads(1)
+    costs = prior(particles)
     expected = [reference_cost(state, "left") for state in particles]
     assert np.count_nonzero(costs) > 3  # some of them do pass through the body
     np.testing.assert_allclose(costs, expected, atol=1e-4)
+    # Threads share the particles (ten groups of 32, the last short): the same numbers.
+    set_threads(2)
+    np.testing.assert_array_equal(prior(particles), costs)
+    set_threads(1)
     # The torso and the legs have no prior.
     assert not ArmCollision(estimate, "torso", SHAPE, PARAMS).active
     assert not np.any(ArmCollision(estimate, "left_leg", SHAPE, PARAMS)(particles))
