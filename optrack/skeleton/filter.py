@@ -111,18 +111,8 @@ def exp_nonpositive(x: np.ndarray, out: np.ndarray) -> None:
         k = np.floor(v * _INV_LN2 + 0.5)
         r = (v - k * _LN2_HI) - k * _LN2_LO
         p = c[12]
-        p = p * r + c[11]
-        p = p * r + c[10]
-        p = p * r + c[9]
-        p = p * r + c[8]
-        p = p * r + c[7]
-        p = p * r + c[6]
-        p = p * r + c[5]
-        p = p * r + c[4]
-        p = p * r + c[3]
-        p = p * r + c[2]
-        p = p * r + c[1]
-        p = p * r + c[0]
+        for j in range(11, -1, -1):  # Horner
+            p = p * r + c[j]
         out[i] = p * _POW2[np.int64(-k)]
 
 

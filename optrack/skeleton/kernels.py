@@ -95,6 +95,20 @@ def fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, tables):
 
 
 @numba.njit(fastmath=True, inline="always")
+def particle_lanes(particles, dims, cos, sin, first, xs, cs, sn):
+    """Put the numbers ``dims`` of the ``LANES`` particles from ``first`` on (their
+    cosines and sines ``cos``, ``sin``, (P, len(dims))) in the lanes :func:`fk_lanes`
+    reads (xs, cs, sn: (D, lanes)); returns how many lanes hold a particle."""
+    lanes = min(xs.shape[1], particles.shape[0] - first)
+    for j in range(dims.shape[0]):
+        d = dims[j]
+        for lane in range(lanes):
+            xs[d, lane] = particles[first + lane, d]
+            cs[d, lane], sn[d, lane] = cos[first + lane, j], sin[first + lane, j]
+    return lanes
+
+
+@numba.njit(fastmath=True, inline="always")
 def _geometry_lanes(pts, rot, parts, tables, radii, out):
     """:func:`~optrack.skeleton.model.geometry_pose` for a few poses at once: pts
     (Q, 3, lanes), rot (F, 3, 3, lanes), out (len(parts), G, lanes); ``tables``:
@@ -203,12 +217,7 @@ def _score_kernel(
         runs = np.empty(2 * k)
         for c in range(group * chunks // groups, (group + 1) * chunks // groups):
             first = c * LANES
-            lanes = min(LANES, n - first)
-            for j in range(dims.shape[0]):
-                d = dims[j]
-                for lane in range(lanes):
-                    xs[d, lane] = particles[first + lane, d]
-                    cs[d, lane], sn[d, lane] = cos_p[first + lane, j], sin_p[first + lane, j]
+            lanes = particle_lanes(particles, dims, cos_p, sin_p, first, xs, cs, sn)
             fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, fk_tables)
             _geometry_lanes(pts, rot, parts, part_tables, radii, geometry)
             _extents_lanes(geometry, axis, 1.0 + consts[1], extents)

@@ -28,7 +28,7 @@ import numba
 import numpy as np
 
 from optrack.params import Params
-from optrack.skeleton.kernels import GROUPS, LANES, fk_lanes, point_distance
+from optrack.skeleton.kernels import GROUPS, LANES, fk_lanes, particle_lanes, point_distance
 from optrack.skeleton.model import (
     FK_TABLES,
     FRAMES,
@@ -77,12 +77,7 @@ def _depths(particles, cos, sin, dims, base_rot, base_pts, offsets, frames_on, p
         tested = np.empty((3, LANES, 3))  # the elbow, the forearm's middle, the wrist
         for c in range(group * chunks // groups, (group + 1) * chunks // groups):
             first = c * LANES
-            lanes = min(LANES, n - first)
-            for j in range(dims.shape[0]):
-                d = dims[j]
-                for lane in range(lanes):
-                    xs[d, lane] = particles[first + lane, d]
-                    cs[d, lane], sn[d, lane] = cos[first + lane, j], sin[first + lane, j]
+            lanes = particle_lanes(particles, dims, cos, sin, first, xs, cs, sn)
             fk_lanes(xs, cs, sn, offsets, frames_on, points_on, rot, pts, tables)
             for lane in range(lanes):
                 for r in range(3):
