@@ -31,6 +31,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from optrack.skeleton.cores import auto_threads
 from optrack.skeleton.model import G
 
 W = 16  # points per block of the distance loop (one AVX-512 vector of float32)
@@ -320,8 +321,6 @@ def sorted_points_numpy(points: np.ndarray, baseline: np.ndarray | None) -> tupl
 def set_threads(threads: int) -> None:
     """How many CPU threads numba's parallel loops share their poses among (0: as many as
     :func:`~optrack.skeleton.cores.auto_threads` says are spare now)."""
-    from optrack.skeleton.cores import auto_threads
-
     count = auto_threads() if int(threads) == 0 else int(threads)
     numba.set_num_threads(max(1, min(count, numba.config.NUMBA_NUM_THREADS)))
 

@@ -4,6 +4,7 @@ written here, with a real process keeping a core busy."""
 
 from __future__ import annotations
 
+import logging
 import os
 import subprocess
 import sys
@@ -55,9 +56,14 @@ def test_samples_are_kept_for_the_period(tmp_path):
     assert cores() == 1 and cores.others == 0.0
 
 
-def test_without_the_cpu_times_one_thread(tmp_path):
+def test_without_the_cpu_times_one_thread(tmp_path, caplog):
     missing = SpareCores(period=0.0, stat=str(tmp_path / "absent"))
-    assert missing() == 1 and missing() == 1
+    with caplog.at_level(logging.INFO, logger="optrack.skeleton"):
+        assert missing() == 1 and missing() == 1
+    said = [
+        r.getMessage() for r in caplog.records if "could not read the CPU times" in r.getMessage()
+    ]
+    assert len(said) == 1 and "absent" in said[0] and "skeleton.threads" in said[0]
     odd = tmp_path / "odd"
     odd.write_text("intr 1 2 3\n")
     assert SpareCores(period=0.0, stat=str(odd))() == 1
