@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from optrack.skeleton.filter import _take_and_diffuse, exp_nonpositive, systematic_resample
+from optrack.skeleton.filter import (
+    _random_walk,
+    _resample_layer,
+    _take_and_diffuse,
+    _weights,
+    exp_nonpositive,
+    systematic_resample,
+)
 from optrack.skeleton.kernels import limb_points, limb_points_numpy, nearest_areas
 from optrack.skeleton.likelihood import associate
 from optrack.skeleton.model import (
@@ -55,20 +62,56 @@ def test_the_weights_exp_equals_numpys():
 
 @pytest.mark.parametrize("diffuse", [True, False])
 def test_take_and_diffuse_equals_numpy(diffuse):
+    """The normals numba's Generator draws in the loop are numpy's standard_normal's, in
+    its order, and the stream goes on from the same place."""
     rng = np.random.default_rng(3)
     particles = rng.normal(0.0, 1.5, (300, D))
     idx = np.arange(12, 16)
     chosen = np.sort(rng.integers(0, 300, 300))
-    noise = rng.normal(size=(300 if diffuse else 0, len(idx)))
     sd = rng.uniform(0.05, 0.5, len(idx))
+    stream, reference = np.random.default_rng(11), np.random.default_rng(11)
     expected = particles.copy()
     expected[:, idx] = expected[np.ix_(chosen, idx)]
     if diffuse:
-        moved = expected[:, idx] + noise * sd
+        moved = expected[:, idx] + reference.standard_normal((300, len(idx))) * sd
         expected[:, idx] = np.clip(moved, LIMITS[idx, 0], LIMITS[idx, 1])
-    _take_and_diffuse(particles, idx, chosen, noise, sd, *LIMITS[idx].T)
+    _take_and_diffuse(particles, idx, chosen, stream, diffuse, sd, *LIMITS[idx].T)
     np.testing.assert_array_equal(particles, expected)
     assert not np.array_equal(particles[:, :12], expected[np.ix_(chosen, range(12))])
+    assert stream.random() == reference.random()
+
+
+def test_a_layers_resampling_draws_numpys_numbers_in_order():
+    """_resample_layer: u for the systematic resampling, then the diffusion's normals,
+    from the filter's stream, as the filter drew them with numpy."""
+    rng = np.random.default_rng(8)
+    particles = rng.normal(0.0, 0.3, (400, D))
+    ll = -rng.exponential(2.0, 400)
+    idx = np.arange(0, 12)
+    sd = rng.uniform(0.01, 0.1, len(idx))
+    low, high = LIMITS[idx].T
+    stream, reference = np.random.default_rng(21), np.random.default_rng(21)
+    expected = particles.copy()
+    chosen = systematic_resample(_weights(ll, 0.5), reference)
+    moved = expected[np.ix_(chosen, idx)] + reference.standard_normal((400, len(idx))) * sd
+    expected[:, idx] = np.clip(moved, low, high)
+    _resample_layer(particles, idx, ll, 0.5, stream, True, sd, low, high)
+    np.testing.assert_array_equal(particles, expected)
+    assert stream.random() == reference.random()
+
+
+def test_the_random_walk_equals_numpy():
+    rng = np.random.default_rng(4)
+    particles = np.clip(rng.normal(0.0, 1.0, (500, D)), LIMITS[:, 0], LIMITS[:, 1])
+    drift = rng.normal(0.0, 0.05, D)
+    step = rng.uniform(0.01, 0.5, D)
+    stream, reference = np.random.default_rng(13), np.random.default_rng(13)
+    noise = reference.standard_normal(particles.shape)
+    expected = np.clip((particles + drift) + noise * step, LIMITS[:, 0], LIMITS[:, 1])
+    assert np.any(expected == LIMITS[:, 0]) and np.any(expected == LIMITS[:, 1])  # clipped
+    _random_walk(particles, drift, step, LIMITS[:, 0], LIMITS[:, 1], stream)
+    np.testing.assert_array_equal(particles, expected)
+    assert stream.random() == reference.random()
 
 
 @pytest.mark.parametrize(("partition", "gate"), [("left_arm", 0.35), ("right_leg", 0.0)])
